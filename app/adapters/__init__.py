@@ -1,0 +1,1 @@
+"""Edges to the outside world: MAVSDK vehicle link, buses, codec, logs."""

@@ -1,0 +1,57 @@
+"""The ``standoff`` command line: the composition root, one module per subcommand.
+
+Each subcommand module defines ``register(subparsers)``, which adds its parser and sets
+``handler``: a function of the parsed arguments that returns the exit code. Errors of the
+project's own tree become a one-line reason on stderr and exit code 2.
+"""
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Callable, Sequence
+
+from app import __version__
+from app.errors import StandoffError
+
+# subcommand modules under app.cli, in the order `standoff --help` lists them
+COMMAND_MODULES: tuple[str, ...] = ()
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="standoff",
+        description="Cooperative standoff tracking of a moving ground target by fixed-wing UAVs.",
+    )
+    parser.add_argument("--version", action="version", version=f"standoff {__version__}")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)"
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"app.cli.{name}").register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except StandoffError as exc:
+        print(f"standoff {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"standoff {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Drivers of the core: the fast numerical simulation and the asyncio loops over injected ports."""

@@ -1,0 +1,1 @@
+"""Benchmarks: commands that print measured figures (run with ``python -m benchmarks.NAME``)."""

@@ -1,0 +1,1 @@
+"""The built-in simulator: pure vehicle and target dynamics, and a MAVLink front over UDP."""
