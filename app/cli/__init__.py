@@ -1,21 +1,30 @@
 """The ``standoff`` command line: the composition root, one module per subcommand.
 
-Each subcommand module defines ``register(subparsers)``, which adds its parser and sets
-``handler``: a function of the parsed arguments that returns the exit code. Errors of the
-project's own tree become a one-line reason on stderr and exit code 2.
+Each public module of this package is one subcommand: it defines ``ORDER`` (its place in
+``standoff --help``) and ``register(subparsers)``, which adds its parser and sets ``handler``: a
+function of the parsed arguments that returns the exit code. Errors of the project's own tree
+become a one-line reason on stderr and exit code 2.
 """
 
 import argparse
 import importlib
 import logging
+import pkgutil
 import sys
 from collections.abc import Callable, Sequence
 
 from app import __version__
 from app.errors import StandoffError
 
+
+def _command_modules() -> tuple[str, ...]:
+    names = [m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")]
+    modules = [importlib.import_module(f"{__name__}.{name}") for name in names]
+    return tuple(m.__name__.rsplit(".", 1)[1] for m in sorted(modules, key=lambda m: m.ORDER))
+
+
 # subcommand modules under app.cli, in the order `standoff --help` lists them
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = _command_modules()
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -31,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
-        importlib.import_module(f"app.cli.{name}").register(subparsers)
+        importlib.import_module(f"{__name__}.{name}").register(subparsers)
     return parser
 
 

@@ -1,0 +1,156 @@
+"""Validated config pieces shared by several commands: vehicle limits, starts, target paths.
+
+Angles are degrees in files (as operators write them) and radians once built into core values.
+"""
+
+import math
+from typing import Annotated, Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from sitl.fixedwing import FixedWingLimits, FixedWingState
+from sitl.target import Leg, Maneuver, TargetPath
+
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class StrictModel(BaseModel):
+    """Frozen, and refusing unknown keys so that a typo in a config file is an error."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LimitsConfig(StrictModel):
+    """A vehicle's envelope (Table 1 / Table 2 of the paper) and its autopilot loop gains."""
+
+    cruise_speed_m_s: Positive
+    min_speed_m_s: Positive
+    max_speed_m_s: Positive
+    max_accel_m_s2: Positive = 2.0
+    max_course_rate_rad_s: Positive = 0.2
+    course_gain_per_s: Positive = 1.0
+    speed_gain_per_s: Positive = 1.0
+
+    @model_validator(mode="after")
+    def _speeds_ordered(self) -> Self:
+        if not self.min_speed_m_s <= self.cruise_speed_m_s <= self.max_speed_m_s:
+            raise ValueError(
+                f"need min_speed_m_s <= cruise_speed_m_s <= max_speed_m_s, got "
+                f"{self.min_speed_m_s}, {self.cruise_speed_m_s}, {self.max_speed_m_s}"
+            )
+        return self
+
+    def build(self) -> FixedWingLimits:
+        return FixedWingLimits(
+            min_speed_m_s=self.min_speed_m_s,
+            max_speed_m_s=self.max_speed_m_s,
+            max_accel_m_s2=self.max_accel_m_s2,
+            max_course_rate_rad_s=self.max_course_rate_rad_s,
+            course_gain_per_s=self.course_gain_per_s,
+            speed_gain_per_s=self.speed_gain_per_s,
+        )
+
+
+class VehicleStartConfig(StrictModel):
+    """Where a vehicle starts: metres east/north of the origin, course in degrees from north."""
+
+    east_m: Finite
+    north_m: Finite
+    course_deg: Finite
+    speed_m_s: Positive
+
+    def build(self) -> FixedWingState:
+        return FixedWingState(
+            east_m=self.east_m,
+            north_m=self.north_m,
+            course_rad=math.radians(self.course_deg),
+            speed_m_s=self.speed_m_s,
+        )
+
+
+class LegConfig(StrictModel):
+    to_east_m: Finite
+    to_north_m: Finite
+    speed_m_s: NonNegative | None = None
+    accel_m_s2: Positive = 1.0
+    max_speed_m_s: Positive = 30.0
+    stop: bool = False
+    brake_m_s2: Positive = 3.0
+    label: str = ""
+
+    def build(self) -> Leg:
+        return Leg(**self.model_dump())
+
+
+class ManeuverConfig(StrictModel):
+    duration_s: Positive
+    accel_m_s2: Finite = 0.0
+    turn_rate_deg_s: Finite = 0.0
+    label: str = ""
+
+    def build(self) -> Maneuver:
+        return Maneuver(
+            duration_s=self.duration_s,
+            accel_m_s2=self.accel_m_s2,
+            turn_rate_rad_s=math.radians(self.turn_rate_deg_s),
+            label=self.label,
+        )
+
+
+class WaypointTargetConfig(StrictModel):
+    """A target that waits at its start, then drives leg after leg (section 5.2's A-B-C-D)."""
+
+    kind: Literal["waypoints"] = "waypoints"
+    start_east_m: Finite = 0.0
+    start_north_m: Finite = 0.0
+    wait_s: NonNegative = 0.0
+    legs: list[LegConfig] = Field(min_length=1)
+
+    def build(self, dt_s: float = 0.01) -> TargetPath:
+        return TargetPath.from_waypoints(
+            self.start_east_m,
+            self.start_north_m,
+            [leg.build() for leg in self.legs],
+            wait_s=self.wait_s,
+            dt_s=dt_s,
+        )
+
+
+class ManeuverTargetConfig(StrictModel):
+    """A target that runs timed manoeuvres from a start state (the Fig. 12-like path)."""
+
+    kind: Literal["maneuvers"]
+    start_east_m: Finite = 0.0
+    start_north_m: Finite = 0.0
+    start_course_deg: Finite = 0.0
+    start_speed_m_s: NonNegative = 0.0
+    maneuvers: list[ManeuverConfig] = Field(min_length=1)
+
+    def build(self, dt_s: float = 0.01) -> TargetPath:
+        return TargetPath.from_maneuvers(
+            self.start_east_m,
+            self.start_north_m,
+            math.radians(self.start_course_deg),
+            self.start_speed_m_s,
+            [m.build() for m in self.maneuvers],
+            dt_s=dt_s,
+        )
+
+
+class StationaryTargetConfig(StrictModel):
+    """A target that stands still at a point."""
+
+    kind: Literal["stationary"]
+    east_m: Finite = 0.0
+    north_m: Finite = 0.0
+
+    def build(self, dt_s: float = 0.01) -> TargetPath:
+        return TargetPath.from_maneuvers(self.east_m, self.north_m, 0.0, 0.0, [Maneuver(1.0)], dt_s)
+
+
+TargetConfig = Annotated[
+    WaypointTargetConfig | ManeuverTargetConfig | StationaryTargetConfig,
+    Field(discriminator="kind"),
+]
