@@ -1,0 +1,1 @@
+"""Run outputs: track files, summaries and plots."""

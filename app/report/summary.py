@@ -1,0 +1,185 @@
+"""The figures of a mission run (the paper's Figs 21-22 as numbers), from sampled team states.
+
+Pure: takes the samples the ground station recorded, returns a JSON-ready dict. Errors are
+measured against the true target (the simulator's, or the scenario's scripted path), so they
+include estimation error, as a user watching the vehicles would see it.
+"""
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.core.frames import TAU
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleSample:
+    vehicle: int
+    active: bool
+    east_m: float
+    north_m: float
+    speed_m_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class TeamSample:
+    """The team and the target at one instant of vehicle time."""
+
+    t_s: float
+    stage: str
+    target_segment: str
+    target_east_m: float
+    target_north_m: float
+    target_v_east_m_s: float
+    target_v_north_m_s: float
+    estimate: tuple[float, float, float, float] | None  # east, north, v_east, v_north
+    vehicles: tuple[VehicleSample, ...]
+
+    def distance_errors(self, radius_m: float) -> dict[int, float]:
+        """r - r_d about the true target for each active vehicle."""
+        return {
+            v.vehicle: math.hypot(v.east_m - self.target_east_m, v.north_m - self.target_north_m)
+            - radius_m
+            for v in self.vehicles
+            if v.active
+        }
+
+    def spacing_errors(self) -> dict[int, float]:
+        """For each active vehicle, the counter-clockwise gap to its neighbour minus 2 pi / n."""
+        active = [v for v in self.vehicles if v.active]
+        if len(active) < 2:
+            return {}
+        angles = sorted(
+            (
+                math.atan2(v.north_m - self.target_north_m, v.east_m - self.target_east_m) % TAU,
+                v.vehicle,
+            )
+            for v in active
+        )
+        desired = TAU / len(active)
+        errors = {}
+        for i, (angle, vehicle) in enumerate(angles):
+            nxt = angles[(i + 1) % len(angles)][0]
+            errors[vehicle] = (nxt - angle) % TAU - desired
+        return errors
+
+
+def _stats(values: Sequence[float]) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    return {"rms": float(np.sqrt(np.mean(a * a))), "max_abs": float(np.max(np.abs(a)))}
+
+
+def _first_lasting(
+    times: Sequence[float], ok: Sequence[bool], hold_s: float, end_t_s: float
+) -> float | None:
+    """First time from which ``ok`` holds for ``hold_s`` (or until ``end_t_s``)."""
+    start: float | None = None
+    for t, good in zip(times, ok, strict=True):
+        if good:
+            start = t if start is None else start
+            if t - start >= hold_s or t >= end_t_s:
+                return start
+        else:
+            start = None
+    return start if start is not None and times and times[-1] >= end_t_s else None
+
+
+def phase_key(sample: TeamSample) -> str:
+    """Which part of the run a sample belongs to: the stage, and in track the target's segment."""
+    if sample.stage == "track":
+        return f"track:{sample.target_segment}"
+    return sample.stage
+
+
+def summarize(
+    samples: Iterable[TeamSample],
+    radius_m: float,
+    tracking_command_t_s: float,
+    radius_tolerance_m: float = 3.0,
+    spacing_tolerance_rad: float = math.radians(2.0),
+    hold_s: float = 5.0,
+) -> dict[str, object]:
+    """Per part of the run and per vehicle: distance, spacing, speed and estimation figures.
+
+    Returns ``{"parts": {key: {"vehicles": {id: figures}, "team": figures}}, "convergence": {...}}``
+    with distances in metres, angles in degrees, speeds in m/s and times in seconds after the
+    tracking command.
+    """
+    rows = sorted(samples, key=lambda s: s.t_s)
+    parts: dict[str, list[TeamSample]] = {}
+    for sample in rows:
+        parts.setdefault(phase_key(sample), []).append(sample)
+    out_parts: dict[str, object] = {}
+    for key, group in parts.items():
+        dist: dict[int, list[float]] = {}
+        spacing: dict[int, list[float]] = {}
+        speed: dict[int, list[float]] = {}
+        est_pos: list[float] = []
+        est_vel: list[float] = []
+        for s in group:
+            for vehicle, e in s.distance_errors(radius_m).items():
+                dist.setdefault(vehicle, []).append(e)
+            for vehicle, e in s.spacing_errors().items():
+                spacing.setdefault(vehicle, []).append(math.degrees(e))
+            for v in s.vehicles:
+                if v.active:
+                    speed.setdefault(v.vehicle, []).append(v.speed_m_s)
+            if s.estimate is not None:
+                est_pos.append(
+                    math.hypot(s.estimate[0] - s.target_east_m, s.estimate[1] - s.target_north_m)
+                )
+                est_vel.append(
+                    math.hypot(
+                        s.estimate[2] - s.target_v_east_m_s, s.estimate[3] - s.target_v_north_m_s
+                    )
+                )
+        vehicles: dict[str, object] = {}
+        for vehicle in sorted(dist):
+            figures: dict[str, object] = {"distance_error_m": _stats(dist[vehicle])}
+            if vehicle in spacing:
+                figures["spacing_error_deg"] = _stats(spacing[vehicle])
+            figures["speed_m_s"] = {"min": min(speed[vehicle]), "max": max(speed[vehicle])}
+            vehicles[str(vehicle)] = figures
+        all_dist = [e for errs in dist.values() for e in errs]
+        all_spacing = [e for errs in spacing.values() for e in errs]
+        team: dict[str, object] = {
+            "start_s": group[0].t_s - tracking_command_t_s,
+            "end_s": group[-1].t_s - tracking_command_t_s,
+        }
+        if all_dist:
+            team["distance_error_m"] = _stats(all_dist)
+        if all_spacing:
+            team["spacing_error_deg"] = _stats(all_spacing)
+        if est_pos:
+            team["estimation_rmse"] = {
+                "position_m": _stats(est_pos)["rms"],
+                "velocity_m_s": _stats(est_vel)["rms"],
+            }
+        out_parts[key] = {"vehicles": vehicles, "team": team}
+    after = [s for s in rows if s.t_s >= tracking_command_t_s and s.stage != "standby"]
+    track_start = next((s.t_s for s in after if s.stage == "track"), math.inf)
+    times = [s.t_s for s in after]
+    near = [
+        bool(errs) and all(abs(e) <= radius_tolerance_m for e in errs.values())
+        for errs in (s.distance_errors(radius_m) for s in after)
+    ]
+    spaced = [
+        bool(errs) and all(abs(e) <= spacing_tolerance_rad for e in errs.values())
+        for errs in (s.spacing_errors() for s in after)
+    ]
+    formed = [a and b for a, b in zip(near, spaced, strict=True)]
+
+    def since_command(t: float | None) -> float | None:
+        return None if t is None else t - tracking_command_t_s
+
+    convergence = {
+        "time_to_circle_s": since_command(_first_lasting(times, near, hold_s, track_start)),
+        "time_to_spacing_s": since_command(_first_lasting(times, spaced, hold_s, track_start)),
+        "time_to_formation_s": since_command(_first_lasting(times, formed, hold_s, track_start)),
+        "radius_tolerance_m": radius_tolerance_m,
+        "spacing_tolerance_deg": math.degrees(spacing_tolerance_rad),
+        "hold_s": hold_s,
+    }
+    return {"parts": out_parts, "convergence": convergence}
