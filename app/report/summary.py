@@ -8,6 +8,7 @@ include estimation error, as a user watching the vehicles would see it.
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -100,7 +101,7 @@ def summarize(
     radius_tolerance_m: float = 3.0,
     spacing_tolerance_rad: float = math.radians(2.0),
     hold_s: float = 5.0,
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """Per part of the run and per vehicle: distance, spacing, speed and estimation figures.
 
     Returns ``{"parts": {key: {"vehicles": {id: figures}, "team": figures}}, "convergence": {...}}``
