@@ -1,0 +1,78 @@
+"""The message bus: one publish/subscribe interface, in-process (default) or MQTT (docs/bus.md)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from app.adapters.bus import topics
+from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, BusClosed, BusStats, Subscription, Will
+from app.adapters.bus.codec import MalformedMessage, UnsupportedVersion, decode, encode
+from app.adapters.bus.inproc import InProcessBroker, InProcessBus
+from app.adapters.bus.messages import (
+    Command,
+    GlobalEstimate,
+    LinkState,
+    LocalEstimate,
+    Message,
+    MissionState,
+    TargetObservation,
+    VehicleStatus,
+)
+from app.adapters.bus.mqtt import Backoff, BrokerUrl, BusUrlError, MqttBus
+from app.adapters.bus.topics import Topic, TopicError, TopicFilter
+
+__all__ = [
+    "DEFAULT_QUEUE_SIZE",
+    "Backoff",
+    "BrokerUrl",
+    "Bus",
+    "BusClosed",
+    "BusStats",
+    "BusUrlError",
+    "Command",
+    "GlobalEstimate",
+    "InProcessBroker",
+    "InProcessBus",
+    "LinkState",
+    "LocalEstimate",
+    "MalformedMessage",
+    "Message",
+    "MissionState",
+    "MqttBus",
+    "Subscription",
+    "TargetObservation",
+    "Topic",
+    "TopicError",
+    "TopicFilter",
+    "UnsupportedVersion",
+    "VehicleStatus",
+    "Will",
+    "decode",
+    "encode",
+    "open_bus",
+    "topics",
+]
+
+
+def open_bus(
+    url: str | None = None,
+    *,
+    client_id: str | None = None,
+    will: Will | None = None,
+    queue_size: int = DEFAULT_QUEUE_SIZE,
+    broker: InProcessBroker | None = None,
+    **mqtt_options: Any,
+) -> Bus:
+    """A bus client to enter with ``async with``: in-process when ``url`` is None, else MQTT.
+
+    ``broker`` shares one in-process broker between clients (in-process only); ``mqtt_options``
+    are ``MqttBus`` keywords (qos, backoff, connect_timeout_s, op_timeout_s, tls_context, ...).
+    A bad URL raises ``BusUrlError`` (both a ConfigError and a BusError) here, before any I/O.
+    """
+    if url is None:
+        if mqtt_options:
+            raise TypeError(f"options for MQTT given to the in-process bus: {sorted(mqtt_options)}")
+        return InProcessBus(broker, client_id=client_id, will=will, queue_size=queue_size)
+    if broker is not None:
+        raise TypeError("an in-process broker was given with an MQTT URL")
+    return MqttBus(url, client_id=client_id, will=will, queue_size=queue_size, **mqtt_options)

@@ -1,0 +1,288 @@
+"""The publish/subscribe interface that both buses implement, and their shared receive path.
+
+    async with open_bus(None) as bus:                      # or open_bus("mqtt://host:1883")
+        async with bus.subscribe("standoff/v1/status/+") as statuses:
+            await bus.publish(topics.status(0), VehicleStatus(...))
+            async for topic, message in statuses:
+                ...
+
+Every payload goes through the codec on both buses; a payload that does not decode is logged,
+counted in ``bus.stats`` and dropped, never raised into the consumer. Each subscription has a
+bounded queue; when a slow consumer lets it fill, the oldest message is dropped and counted
+(the freshest data is what a control loop wants).
+"""
+
+from __future__ import annotations
+
+import abc
+import asyncio
+import collections
+import dataclasses
+import logging
+from collections.abc import Iterable
+from types import TracebackType
+from typing import Self
+
+from app.adapters.bus import codec
+from app.adapters.bus.messages import Message
+from app.adapters.bus.topics import Topic, TopicFilter, as_filter, as_topic
+from app.errors import BusError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_QUEUE_SIZE = 256
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class BusStats:
+    """Counters of one bus client since it was opened."""
+
+    published: int = 0  # messages this client sent
+    received: int = 0  # payloads that arrived for at least one of its subscriptions
+    delivered: int = 0  # (message, subscription) pairs queued for a consumer
+    dropped: int = 0  # messages pushed out of a full subscription queue
+    malformed: int = 0  # payloads that did not decode (garbled, bad schema, non-finite)
+    wrong_version: int = 0  # well-formed payloads of another schema version
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Will:
+    """A message the bus publishes for a client that dies without closing (MQTT last will)."""
+
+    topic: Topic
+    message: Message
+    qos: int = 1
+    retain: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "topic", as_topic(self.topic))
+        if self.qos not in (0, 1, 2):
+            raise ValueError(f"qos must be 0, 1 or 2, got {self.qos!r}")
+
+
+class BusClosed(BusError):
+    """The bus is not open (not entered yet, or already closed)."""
+
+
+class Subscription:
+    """The messages on one topic filter: enter it, then ``async for topic, message in it``.
+
+    Iteration ends when the subscription or its bus is closed. Not for sharing between tasks.
+    """
+
+    def __init__(self, bus: Bus, topic_filter: TopicFilter, queue_size: int) -> None:
+        if queue_size < 1:
+            raise ValueError(f"queue_size must be at least 1, got {queue_size}")
+        self.topic_filter = topic_filter
+        self.queue_size = queue_size
+        self.dropped = 0
+        self._bus = bus
+        self._queue: collections.deque[tuple[Topic, Message]] = collections.deque()
+        self._wakeup = asyncio.Event()
+        self._state = "new"  # new -> open -> closed
+
+    def __repr__(self) -> str:
+        return f"Subscription({self.topic_filter.value!r}, {self._state})"
+
+    async def __aenter__(self) -> Self:
+        if self._state != "new":
+            raise BusError(f"{self!r} cannot be entered twice")
+        self._state = "open"
+        try:
+            await self._bus._attach(self)
+        except BaseException:
+            self._end()
+            raise
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Unsubscribe; messages already queued can still be read, then iteration ends."""
+        if self._state == "open":
+            self._end()
+            await self._bus._detach(self)
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> tuple[Topic, Message]:
+        if self._state == "new":
+            raise BusError(f"enter {self!r} with 'async with' before reading it")
+        while not self._queue:
+            if self._state == "closed":
+                raise StopAsyncIteration
+            self._wakeup.clear()
+            await self._wakeup.wait()
+        return self._queue.popleft()
+
+    def pending(self) -> int:
+        """How many messages are queued, unread."""
+        return len(self._queue)
+
+    # called by the bus
+    def _offer(self, topic: Topic, message: Message) -> bool:
+        """Queue a message; return False when it pushed out the oldest one."""
+        kept = True
+        if len(self._queue) >= self.queue_size:
+            self._queue.popleft()
+            self.dropped += 1
+            kept = False
+        self._queue.append((topic, message))
+        self._wakeup.set()
+        return kept
+
+    def _end(self) -> None:
+        self._state = "closed"
+        self._wakeup.set()
+
+
+class Bus(abc.ABC):
+    """One client of a publish/subscribe bus with MQTT topic semantics; an async context manager."""
+
+    def __init__(self, *, client_id: str, queue_size: int = DEFAULT_QUEUE_SIZE) -> None:
+        if queue_size < 1:
+            raise ValueError(f"queue_size must be at least 1, got {queue_size}")
+        self.client_id = client_id
+        self._default_queue_size = queue_size
+        self._subscriptions: dict[TopicFilter, list[Subscription]] = {}
+        self._counts: collections.Counter[str] = collections.Counter()
+        self._open = False
+
+    @property
+    def stats(self) -> BusStats:
+        return BusStats(**{f.name: self._counts[f.name] for f in dataclasses.fields(BusStats)})
+
+    @property
+    def is_open(self) -> bool:
+        return self._open
+
+    async def __aenter__(self) -> Self:
+        if self._open:
+            raise BusError(f"bus {self.client_id!r} is already open")
+        await self._start()
+        self._open = True
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._open = False
+        for subs in self._subscriptions.values():
+            for sub in subs:
+                sub._end()
+        self._subscriptions.clear()
+        await self._stop(crashed=exc is not None and not isinstance(exc, asyncio.CancelledError))
+
+    async def publish(
+        self, topic: Topic | str, message: Message, *, qos: int | None = None
+    ) -> None:
+        """Send ``message`` on ``topic`` (a name, no wildcards). Raises BusError on failure."""
+        if not isinstance(message, Message):
+            raise TypeError(f"publish takes a bus Message, got {type(message).__name__}")
+        topic = as_topic(topic)
+        if not self._open:
+            raise BusClosed(f"bus {self.client_id!r} is not open; cannot publish on {topic}")
+        await self._send(topic, codec.encode(message), qos)
+        self._counts["published"] += 1
+
+    def subscribe(
+        self, topic_filter: TopicFilter | Topic | str, *, queue_size: int | None = None
+    ) -> Subscription:
+        """A subscription to ``topic_filter`` (``+`` and ``#`` wildcards); enter it to start it.
+
+        Once ``async with bus.subscribe(f)`` has entered, every message published after that
+        and matching ``f`` is delivered to it (subject to its queue bound).
+        """
+        size = self._default_queue_size if queue_size is None else queue_size
+        return Subscription(self, as_filter(topic_filter), size)
+
+    # shared machinery
+    async def _attach(self, sub: Subscription) -> None:
+        if not self._open:
+            raise BusClosed(f"bus {self.client_id!r} is not open; cannot subscribe")
+        subs = self._subscriptions.setdefault(sub.topic_filter, [])
+        subs.append(sub)
+        if len(subs) == 1:
+            try:
+                await self._add_filter(sub.topic_filter)
+            except BaseException:
+                self._remove(sub)
+                raise
+
+    async def _detach(self, sub: Subscription) -> None:
+        if self._remove(sub) and self._open:
+            await self._remove_filter(sub.topic_filter)
+
+    def _remove(self, sub: Subscription) -> bool:
+        """Forget ``sub``; True when it was the last one on its filter."""
+        subs = self._subscriptions.get(sub.topic_filter, [])
+        if sub in subs:
+            subs.remove(sub)
+            if not subs:
+                del self._subscriptions[sub.topic_filter]
+                return True
+        return False
+
+    def _ingest(
+        self, topic_name: str, payload: bytes, filters: Iterable[TopicFilter] | None = None
+    ) -> None:
+        """Decode a received payload and queue it for the matching subscriptions.
+
+        ``filters``, when the transport knows them, are the filters the payload arrived for;
+        otherwise the topic is matched against every subscription. Never raises on bad input.
+        """
+        if filters is None:
+            targets = [f for f in self._subscriptions if f.matches(topic_name)]
+        else:
+            targets = [f for f in set(filters) if f in self._subscriptions]
+        if not targets:
+            return
+        self._counts["received"] += 1
+        try:
+            topic = Topic(topic_name)
+            message = codec.decode(payload)
+        except codec.UnsupportedVersion as exc:
+            self._counts["wrong_version"] += 1
+            log.warning("bus %s: dropped a message on %s: %s", self.client_id, topic_name, exc)
+            return
+        except (codec.MalformedMessage, BusError) as exc:
+            self._counts["malformed"] += 1
+            log.warning("bus %s: dropped a message on %r: %s", self.client_id, topic_name, exc)
+            return
+        for topic_filter in targets:
+            for sub in self._subscriptions[topic_filter]:
+                self._counts["delivered"] += 1
+                if not sub._offer(topic, message):
+                    self._counts["dropped"] += 1
+                    log.debug("bus %s: %r full, dropped its oldest", self.client_id, sub)
+
+    # transport
+    @abc.abstractmethod
+    async def _start(self) -> None:
+        """Connect; raise BusError when that is impossible."""
+
+    @abc.abstractmethod
+    async def _stop(self, *, crashed: bool) -> None:
+        """Disconnect; ``crashed`` when the context exits on an error (the last will applies)."""
+
+    @abc.abstractmethod
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
+        """Put a payload on the wire."""
+
+    @abc.abstractmethod
+    async def _add_filter(self, topic_filter: TopicFilter) -> None:
+        """Start receiving ``topic_filter``; return once messages published after it arrive."""
+
+    @abc.abstractmethod
+    async def _remove_filter(self, topic_filter: TopicFilter) -> None:
+        """Stop receiving ``topic_filter``."""

@@ -1,0 +1,75 @@
+"""The in-process bus (the default): clients of one ``InProcessBroker`` in one event loop.
+
+It keeps MQTT's semantics so that code moves between the buses unchanged: topic wildcards,
+payloads encoded and validated by the codec on receipt, per-subscription bounded queues, and a
+last will published for a client whose context exits on an error.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+
+from app.adapters.bus import codec
+from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, Will
+from app.adapters.bus.topics import Topic, TopicFilter
+
+log = logging.getLogger(__name__)
+_ids = itertools.count(1)
+
+
+class InProcessBroker:
+    """Routes payloads between the in-process clients that share it."""
+
+    def __init__(self) -> None:
+        self._clients: list[InProcessBus] = []
+
+    def _join(self, client: InProcessBus) -> None:
+        self._clients.append(client)
+
+    def _leave(self, client: InProcessBus) -> None:
+        if client in self._clients:
+            self._clients.remove(client)
+
+    def route(self, topic: str, payload: bytes) -> None:
+        """Hand a payload to every client; each decodes what it has subscribed to."""
+        for client in list(self._clients):
+            client._ingest(topic, payload)
+
+
+class InProcessBus(Bus):
+    """A client of an in-process broker (a private one unless ``broker`` is given)."""
+
+    def __init__(
+        self,
+        broker: InProcessBroker | None = None,
+        *,
+        client_id: str | None = None,
+        will: Will | None = None,
+        queue_size: int = DEFAULT_QUEUE_SIZE,
+    ) -> None:
+        super().__init__(client_id=client_id or f"inproc-{next(_ids)}", queue_size=queue_size)
+        self.broker = broker if broker is not None else InProcessBroker()
+        self.will = will
+
+    async def _start(self) -> None:
+        self.broker._join(self)
+
+    async def _stop(self, *, crashed: bool) -> None:
+        self.broker._leave(self)
+        if crashed and self.will is not None:
+            log.info("bus %s exited on an error: publishing its will", self.client_id)
+            self.broker.route(self.will.topic.value, codec.encode(self.will.message))
+
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
+        self.broker.route(topic.value, payload)
+
+    async def _add_filter(self, topic_filter: TopicFilter) -> None:
+        return None
+
+    async def _remove_filter(self, topic_filter: TopicFilter) -> None:
+        return None
+
+    def inject_raw(self, topic: str, payload: bytes) -> None:
+        """Route raw bytes as if a foreign client had published them (fault injection)."""
+        self.broker.route(topic, payload)

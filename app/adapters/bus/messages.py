@@ -1,0 +1,200 @@
+"""The bus's message schemas (version 1): frozen pydantic models that validate on construction.
+
+Every message carries the schema version ``v``, its ``kind``, the ``sender`` (a client name)
+and ``t_s``, the mission time in seconds that its content refers to. Numbers must be finite.
+The target state order is [east, v_east, north, v_north, a_east, a_north] (m, m/s, m/s^2).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Annotated, Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+SCHEMA_VERSION = 1
+STATE_DIM = 6
+STATE_ORDER = ("east_m", "v_east_m_s", "north_m", "v_north_m_s", "a_east_m_s2", "a_north_m_s2")
+
+Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
+VehicleId = Annotated[int, Field(ge=0, le=254)]  # vehicle i flies as MAVLink system id i + 1
+Finite = float  # finiteness is enforced model-wide by allow_inf_nan=False
+NonNegative = Annotated[float, Field(ge=0.0)]
+Positive = Annotated[float, Field(gt=0.0)]
+State = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
+Row = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
+Covariance = Annotated[tuple[Row, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
+Stage = Literal["gather", "adjust", "track"]
+
+_SYMMETRY_RTOL = 1e-6
+
+
+class Message(BaseModel):
+    """Fields common to every bus message."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    v: Literal[1] = 1
+    sender: Name
+    t_s: Finite
+
+
+def _check_covariance(p: tuple[tuple[float, ...], ...]) -> None:
+    scale = 1.0 + max(abs(value) for row in p for value in row)
+    for i in range(STATE_DIM):
+        if p[i][i] < 0.0:
+            raise ValueError(f"P[{i}][{i}] = {p[i][i]} is a negative variance")
+        for j in range(i):
+            if abs(p[i][j] - p[j][i]) > _SYMMETRY_RTOL * scale:
+                raise ValueError(f"P is not symmetric: P[{i}][{j}]={p[i][j]} P[{j}][{i}]={p[j][i]}")
+
+
+def _rows(matrix: Sequence[Sequence[float]]) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(float(v) for v in row) for row in matrix)
+
+
+class TargetObservation(Message):
+    """One position fix of the target in the local frame, with its 1-sigma error."""
+
+    kind: Literal["observation"] = "observation"
+    sensor: Name
+    vehicle: VehicleId | None = None  # the vehicle whose sensor made it; None for external ones
+    east_m: Finite
+    north_m: Finite
+    sigma_m: Positive
+
+
+class LocalEstimate(Message):
+    """One agent's local filter output (x_i, P_i) at ``t_s``."""
+
+    kind: Literal["estimate.local"] = "estimate.local"
+    vehicle: VehicleId
+    x: State
+    P: Covariance
+
+    @model_validator(mode="after")
+    def _covariance(self) -> Self:
+        _check_covariance(self.P)
+        return self
+
+    @classmethod
+    def from_arrays(
+        cls,
+        *,
+        sender: str,
+        t_s: float,
+        vehicle: int,
+        x: Sequence[float],
+        P: Sequence[Sequence[float]],
+    ) -> LocalEstimate:
+        """Build from numpy arrays or nested sequences (shape (6,) and (6, 6))."""
+        return cls(
+            sender=sender, t_s=t_s, vehicle=vehicle, x=tuple(float(v) for v in x), P=_rows(P)
+        )
+
+
+class GlobalEstimate(Message):
+    """The main filter's fused estimate and each vehicle's information-sharing factor beta_i."""
+
+    kind: Literal["estimate.global"] = "estimate.global"
+    x: State
+    P: Covariance
+    beta: dict[VehicleId, Annotated[float, Field(gt=0.0, le=1.0)]]
+
+    @model_validator(mode="after")
+    def _check(self) -> Self:
+        _check_covariance(self.P)
+        total = math.fsum(self.beta.values())
+        if total > 1.0 + 1e-9:
+            raise ValueError(f"the beta factors sum to {total}, more than 1")
+        return self
+
+    @classmethod
+    def from_arrays(
+        cls,
+        *,
+        sender: str,
+        t_s: float,
+        x: Sequence[float],
+        P: Sequence[Sequence[float]],
+        beta: dict[int, float],
+    ) -> GlobalEstimate:
+        return cls(
+            sender=sender,
+            t_s=t_s,
+            x=tuple(float(v) for v in x),
+            P=_rows(P),
+            beta={int(k): float(b) for k, b in beta.items()},
+        )
+
+
+class MissionState(Message):
+    """The ground station's decision: the stage, who flies, and the desired phase spacing."""
+
+    kind: Literal["mission"] = "mission"
+    stage: Stage
+    active: tuple[VehicleId, ...]
+    spacing_rad: Annotated[float, Field(gt=0.0, le=2.0 * math.pi)]
+
+    @model_validator(mode="after")
+    def _unique(self) -> Self:
+        if len(set(self.active)) != len(self.active):
+            raise ValueError(f"active vehicles must be unique, got {self.active}")
+        return self
+
+
+class VehicleStatus(Message):
+    """One vehicle's pose, guidance phase and health, published by its agent."""
+
+    kind: Literal["status"] = "status"
+    vehicle: VehicleId
+    east_m: Finite
+    north_m: Finite
+    alt_m: Finite
+    course_rad: Finite  # MAVLink convention: clockwise from north
+    speed_m_s: NonNegative
+    phase_rad: Finite  # the vehicle's phase angle about the target estimate
+    stage: Stage
+    link: Literal["ok", "degraded", "lost"]  # the agent's MAVLink link to its vehicle
+    healthy: bool
+    detail: Annotated[str, Field(max_length=200)] = ""
+
+
+class LinkState(Message):
+    """A client's presence on the bus; registered as its MQTT last will with ``online=False``."""
+
+    kind: Literal["link"] = "link"
+    online: bool
+    vehicle: VehicleId | None = None
+    reason: Annotated[str, Field(max_length=200)] = ""
+
+
+class Command(Message):
+    """Ground -> agents: an instruction for some vehicles (all when ``vehicles`` is None)."""
+
+    kind: Literal["command"] = "command"
+    command: Literal["hold", "resume", "shutdown"]
+    vehicles: tuple[VehicleId, ...] | None = None
+
+
+AnyMessage = Annotated[
+    TargetObservation
+    | LocalEstimate
+    | GlobalEstimate
+    | MissionState
+    | VehicleStatus
+    | LinkState
+    | Command,
+    Field(discriminator="kind"),
+]
+
+MESSAGE_TYPES: tuple[type[Message], ...] = (
+    TargetObservation,
+    LocalEstimate,
+    GlobalEstimate,
+    MissionState,
+    VehicleStatus,
+    LinkState,
+    Command,
+)

@@ -1,0 +1,385 @@
+"""The MQTT bus: one aiomqtt 2.x client kept connected (back-off, re-subscribe) for its lifetime.
+
+MQTT 5 is used so that each filter carries a subscription identifier: a message is handed to
+exactly the subscriptions it arrived for, even when filters overlap (a broker may send one copy
+per matching filter). Vendor errors become ``BusError`` with the cause chained.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import itertools
+import logging
+import secrets
+import ssl
+import urllib.parse
+from collections.abc import Awaitable, Callable, Iterator
+from typing import Literal
+
+import aiomqtt
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+
+from app.adapters.bus import codec
+from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, BusClosed, Will
+from app.adapters.bus.topics import Topic, TopicFilter
+from app.errors import BusError, ConfigError
+
+log = logging.getLogger(__name__)
+
+Sleep = Callable[[float], Awaitable[None]]
+QoS = Literal[0, 1, 2]
+
+
+class BusUrlError(ConfigError, BusError):
+    """A broker URL that cannot be used; the message shows the URL (without its password)."""
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class BrokerUrl:
+    """``mqtt://[user[:password]@]host[:port]`` (port 1883) or ``mqtts://`` (TLS, port 8883)."""
+
+    host: str
+    port: int
+    tls: bool = False
+    username: str | None = None
+    password: str | None = dataclasses.field(default=None, repr=False)
+
+    @classmethod
+    def parse(cls, url: str) -> BrokerUrl:
+        shown = _redact(url)
+        try:
+            parts = urllib.parse.urlsplit(url)
+            port = parts.port
+        except ValueError as exc:
+            raise BusUrlError(f"bad broker URL {shown!r}: {exc}") from exc
+        if parts.scheme not in ("mqtt", "mqtts"):
+            raise BusUrlError(
+                f"bad broker URL {shown!r}: the scheme must be mqtt:// or mqtts://"
+                " (e.g. mqtt://localhost:1883)"
+            )
+        if not parts.hostname:
+            raise BusUrlError(f"bad broker URL {shown!r}: no host")
+        if parts.path not in ("", "/") or parts.query or parts.fragment:
+            raise BusUrlError(
+                f"bad broker URL {shown!r}: only mqtt[s]://[user:password@]host[:port] is accepted"
+            )
+        if port == 0:
+            raise BusUrlError(f"bad broker URL {shown!r}: port 0")
+        if parts.password is not None and not parts.username:
+            raise BusUrlError(f"bad broker URL {shown!r}: a password without a user name")
+        tls = parts.scheme == "mqtts"
+        return cls(
+            host=parts.hostname,
+            port=port if port is not None else (8883 if tls else 1883),
+            tls=tls,
+            username=urllib.parse.unquote(parts.username) if parts.username else None,
+            password=urllib.parse.unquote(parts.password) if parts.password is not None else None,
+        )
+
+    def __str__(self) -> str:
+        user = f"{self.username}:***@" if self.username else ""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{'mqtts' if self.tls else 'mqtt'}://{user}{host}:{self.port}"
+
+
+def _redact(url: str) -> str:
+    head, at, tail = url.rpartition("@")
+    if not at or "://" not in head:
+        return url
+    scheme, _, userinfo = head.partition("://")
+    user, colon, _ = userinfo.partition(":")
+    return f"{scheme}://{user}{':***' if colon else ''}@{tail}"
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Backoff:
+    """Reconnect delays: ``initial_s``, times ``factor`` after each failure, at most ``max_s``."""
+
+    initial_s: float = 0.1
+    factor: float = 2.0
+    max_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.initial_s <= self.max_s) or self.factor < 1.0:
+            raise ValueError(f"need 0 < initial_s <= max_s and factor >= 1, got {self}")
+
+    def delays(self) -> Iterator[float]:
+        delay = self.initial_s
+        while True:
+            yield delay
+            delay = min(delay * self.factor, self.max_s)
+
+
+class MqttBus(Bus):
+    """A client of an MQTT broker; open with ``async with``.
+
+    Parameters
+    ----------
+    url
+        ``mqtt://[user:password@]host[:port]`` or ``mqtts://...`` (TLS).
+    client_id
+        The MQTT client identifier (unique per broker; a second client with the same one
+        pushes the first off). Generated when omitted.
+    will
+        Published by the broker when this client vanishes without closing (and by the bus
+        itself when its context exits on an error).
+    qos
+        The QoS for publishes and subscriptions (0: at most once, 1: at least once).
+    connect_timeout_s
+        How long entering the bus waits for the first connection before raising BusError.
+    op_timeout_s
+        How long a publish or subscribe waits, including for a lost connection to come back.
+    tls_context
+        For ``mqtts://``: the SSL context (default: the system's trusted CAs).
+    sleep
+        The clock's sleep, used for the reconnect back-off (injectable for tests).
+    """
+
+    def __init__(
+        self,
+        url: BrokerUrl | str,
+        *,
+        client_id: str | None = None,
+        will: Will | None = None,
+        qos: QoS = 0,
+        queue_size: int = DEFAULT_QUEUE_SIZE,
+        backoff: Backoff = Backoff(),
+        connect_timeout_s: float = 10.0,
+        op_timeout_s: float = 5.0,
+        keepalive_s: int = 10,
+        tls_context: ssl.SSLContext | None = None,
+        sleep: Sleep = asyncio.sleep,
+    ) -> None:
+        super().__init__(
+            client_id=client_id or f"standoff-{secrets.token_hex(4)}", queue_size=queue_size
+        )
+        self.url = url if isinstance(url, BrokerUrl) else BrokerUrl.parse(url)
+        if qos not in (0, 1, 2):
+            raise ValueError(f"qos must be 0, 1 or 2, got {qos!r}")
+        if tls_context is not None and not self.url.tls:
+            raise BusUrlError(f"a TLS context was given for {self.url}; use mqtts://")
+        self.will = will
+        self.qos: QoS = qos
+        self.backoff = backoff
+        self.connect_timeout_s = connect_timeout_s
+        self.op_timeout_s = op_timeout_s
+        self.keepalive_s = keepalive_s
+        self._tls_context = tls_context
+        self._sleep = sleep
+        self._client: aiomqtt.Client | None = None
+        self._connected = asyncio.Event()
+        self._changed = asyncio.Event()  # set (and replaced) whenever _client changes
+        self._task_group: asyncio.TaskGroup | None = None
+        self._runner: asyncio.Task[None] | None = None
+        self._last_error: BaseException | None = None
+        self._filter_ids: dict[TopicFilter, int] = {}
+        self._next_id = itertools.count(1)
+        self.connections = 0  # successful connections so far (reconnects = connections - 1)
+
+    def __repr__(self) -> str:
+        return f"MqttBus({str(self.url)!r}, client_id={self.client_id!r})"
+
+    # lifecycle
+    async def _start(self) -> None:
+        self._task_group = asyncio.TaskGroup()
+        await self._task_group.__aenter__()
+        self._runner = self._task_group.create_task(self._run(), name=f"mqtt-bus-{self.client_id}")
+        try:
+            async with asyncio.timeout(self.connect_timeout_s):
+                await self._connected.wait()
+        except TimeoutError as exc:
+            await self._shutdown()
+            raise BusError(
+                f"cannot connect to the broker at {self.url} within {self.connect_timeout_s} s:"
+                f" {self._last_error or 'no answer'}"
+            ) from (self._last_error or exc)
+        except BaseException:
+            await self._shutdown()
+            raise
+
+    async def _stop(self, *, crashed: bool) -> None:
+        if crashed and self.will is not None and self._client is not None:
+            # A crash that unwinds through ``async with`` still closes the socket politely, so
+            # the broker would not send the will: send it ourselves.
+            try:
+                async with asyncio.timeout(self.op_timeout_s):
+                    await self._client.publish(
+                        self.will.topic.value,
+                        codec.encode(self.will.message),
+                        qos=self.will.qos,
+                        retain=self.will.retain,
+                    )
+            except (aiomqtt.MqttError, TimeoutError) as exc:
+                log.warning("bus %s: could not publish its will: %s", self.client_id, exc)
+        await self._shutdown()
+
+    async def _shutdown(self) -> None:
+        if self._runner is not None:
+            self._runner.cancel()
+        if self._task_group is not None:
+            task_group, self._task_group = self._task_group, None
+            await task_group.__aexit__(None, None, None)
+        self._runner = None
+
+    def _make_client(self) -> aiomqtt.Client:
+        will = None
+        if self.will is not None:
+            will = aiomqtt.Will(
+                topic=self.will.topic.value,
+                payload=codec.encode(self.will.message),
+                qos=self.will.qos,
+                retain=self.will.retain,
+            )
+        tls_context = None
+        if self.url.tls:
+            tls_context = self._tls_context or ssl.create_default_context()
+        return aiomqtt.Client(
+            self.url.host,
+            self.url.port,
+            username=self.url.username,
+            password=self.url.password,
+            identifier=self.client_id,
+            protocol=aiomqtt.ProtocolVersion.V5,
+            will=will,
+            clean_start=True,
+            keepalive=self.keepalive_s,
+            timeout=self.op_timeout_s,
+            tls_context=tls_context,
+            logger=log,
+        )
+
+    async def _run(self) -> None:
+        """Connect, re-subscribe, read; on loss, wait the back-off and do it again."""
+        delays = self.backoff.delays()
+        while True:
+            try:
+                async with self._make_client() as client:
+                    for topic_filter in list(self._subscriptions):
+                        await self._subscribe(client, topic_filter)
+                    self._set_client(client)
+                    self.connections += 1
+                    delays = self.backoff.delays()
+                    if self.connections > 1:
+                        log.info("bus %s: reconnected to %s", self.client_id, self.url)
+                    async for message in client.messages:
+                        self._receive(message)
+            except (aiomqtt.MqttError, BusError) as exc:
+                self._last_error = exc
+                log.warning(
+                    "bus %s: connection to %s lost or refused: %s", self.client_id, self.url, exc
+                )
+            finally:
+                self._set_client(None)
+            await self._sleep(next(delays))
+
+    @property
+    def connected(self) -> bool:
+        """Whether the client is connected now, with its subscriptions in place."""
+        return self._client is not None
+
+    async def wait_for_connection(self, number: int = 1) -> None:
+        """Wait until the ``number``-th successful connection (2 = the first reconnect) is up.
+
+        Bound it with ``asyncio.timeout``; the back-off keeps retrying meanwhile.
+        """
+        while self.connections < number or self._client is None:
+            await self._changed.wait()
+
+    def _set_client(self, client: aiomqtt.Client | None) -> None:
+        self._client = client
+        if client is None:
+            self._connected.clear()
+        else:
+            self._connected.set()
+        changed, self._changed = self._changed, asyncio.Event()
+        changed.set()
+
+    async def _await_change(self, client: aiomqtt.Client, deadline: float) -> bool:
+        """Wait until the runner replaces ``client`` (a lost connection); False at the deadline."""
+        try:
+            async with asyncio.timeout_at(deadline):
+                while self._client is client:
+                    await self._changed.wait()
+        except TimeoutError:
+            return False
+        return True
+
+    def _receive(self, message: aiomqtt.Message) -> None:
+        filters = None
+        ids = getattr(message.properties, "SubscriptionIdentifier", None)
+        if ids:
+            by_id = {i: f for f, i in self._filter_ids.items()}
+            filters = [by_id[i] for i in ids if i in by_id]
+        self._ingest(message.topic.value, bytes(message.payload), filters)
+
+    async def _connected_client(self, deadline: float) -> aiomqtt.Client:
+        if not self.is_open and self._runner is None:
+            raise BusClosed(f"bus {self.client_id!r} is not open")
+        try:
+            async with asyncio.timeout_at(deadline):
+                while self._client is None:
+                    await self._connected.wait()
+        except TimeoutError as exc:
+            raise BusError(
+                f"not connected to the broker at {self.url}: {self._last_error or 'timed out'}"
+            ) from exc
+        return self._client
+
+    async def _subscribe(self, client: aiomqtt.Client, topic_filter: TopicFilter) -> None:
+        if topic_filter not in self._filter_ids:
+            self._filter_ids[topic_filter] = next(self._next_id)
+        properties = Properties(PacketTypes.SUBSCRIBE)  # type: ignore[no-untyped-call]
+        properties.SubscriptionIdentifier = self._filter_ids[topic_filter]
+        granted = await client.subscribe(
+            topic_filter.value, qos=self.qos, properties=properties, timeout=self.op_timeout_s
+        )
+        codes = [getattr(code, "value", code) for code in granted]
+        if any(code >= 0x80 for code in codes):
+            raise BusError(
+                f"the broker at {self.url} refused the subscription {topic_filter}:"
+                f" {[str(code) for code in granted]}"
+            )
+
+    # transport operations, each retried across a reconnect until op_timeout_s
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
+        qos = self.qos if qos is None else qos
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.op_timeout_s
+        while True:
+            client = await self._connected_client(deadline)
+            try:
+                await client.publish(
+                    topic.value, payload, qos=qos, timeout=max(deadline - loop.time(), 0.01)
+                )
+                return
+            except aiomqtt.MqttError as exc:
+                if not await self._await_change(client, deadline):
+                    raise BusError(f"publish on {topic} to {self.url} failed: {exc}") from exc
+                log.info("bus %s: publish on %s failed (%s); retrying", self.client_id, topic, exc)
+
+    async def _add_filter(self, topic_filter: TopicFilter) -> None:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.op_timeout_s
+        while True:
+            client = await self._connected_client(deadline)
+            try:
+                await self._subscribe(client, topic_filter)
+                return
+            except aiomqtt.MqttError as exc:
+                if not await self._await_change(client, deadline):
+                    raise BusError(
+                        f"subscribe to {topic_filter} at {self.url} failed: {exc}"
+                    ) from exc
+                # the connection dropped under us: try again on the next one
+
+    async def _remove_filter(self, topic_filter: TopicFilter) -> None:
+        self._filter_ids.pop(topic_filter, None)
+        client = self._client
+        if client is None:
+            return  # not connected: it will not be re-subscribed either
+        try:
+            await client.unsubscribe(topic_filter.value, timeout=self.op_timeout_s)
+        except aiomqtt.MqttError as exc:
+            log.info("bus %s: unsubscribe from %s failed: %s", self.client_id, topic_filter, exc)
