@@ -258,8 +258,8 @@ class MqttBus(Bus):
                 async with self._make_client() as client:
                     for topic_filter in list(self._subscriptions):
                         await self._subscribe(client, topic_filter)
-                    self._set_client(client)
                     self.connections += 1
+                    self._set_client(client)
                     delays = self.backoff.delays()
                     if self.connections > 1:
                         log.info("bus %s: reconnected to %s", self.client_id, self.url)
