@@ -1,0 +1,851 @@
+"""The vehicle link over MAVSDK 4.x: one ``MavsdkHub`` (one Mavsdk, many connections) and one
+``MavsdkVehicleLink`` per MAVLink system id.
+
+Kinematic telemetry is read from GLOBAL_POSITION_INT through MavlinkDirect, so that every frame
+carries the vehicle's own ``time_boot_ms`` with a consistent position and velocity; flight mode and
+armed state come from the autopilot's HEARTBEAT (decoded by the autopilot adapter); health and
+in-air from the Telemetry plugin; target observations from CAMERA_TRACKING_GEO_STATUS. Every
+MAVSDK exception is translated into ``LinkError`` here, with ``from exc``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import threading
+import time
+from collections.abc import AsyncIterator, Callable, Iterable
+from contextlib import AsyncExitStack, aclosing, asynccontextmanager
+from dataclasses import dataclass, field, replace
+from types import TracebackType
+from typing import Any, Final, Generic, TypeVar
+from urllib.parse import urlsplit
+
+from mavsdk import LogLevel, log_subscribe
+from mavsdk.asyncio import (
+    ComponentType,
+    Configuration,
+    Mavsdk,
+    MavsdkConnectionError,
+    MavsdkError,
+    System,
+)
+from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+from mavsdk.asyncio.plugins.offboard import OffboardAsync
+from mavsdk.asyncio.plugins.param import ParamAsync
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+from app.adapters.vehicle.autopilots import (
+    MAV_MODE_FLAG_SAFETY_ARMED,
+    ArduPlaneAdapter,
+    AutopilotAdapter,
+    AutopilotName,
+    Px4FixedWingAdapter,
+    SentSetpoint,
+    SetpointLimits,
+    VehicleState,
+    VelocityAdapter,
+    choose_autopilot,
+    limit_setpoint,
+)
+from app.adapters.vehicle.link import (
+    CourseSpeedCommand,
+    GeodeticOrigin,
+    LeftOffboard,
+    LinkEvent,
+    LinkLost,
+    LinkRestored,
+    OffboardLostError,
+    SetpointLimited,
+    TargetObservation,
+    VehicleClockReset,
+    VehicleTelemetry,
+)
+from app.core.frames import course_from_velocity
+from app.errors import ConfigError, LinkError
+
+log = logging.getLogger(__name__)
+
+URL_SCHEMES: Final = ("udpin", "udpout", "tcp", "tcpin", "tcpout", "serial")
+MAV_COMP_ID_AUTOPILOT1: Final = 1
+MAV_COMP_ID_CAMERA: Final = 100
+CAMERA_TRACKING_STATUS_FLAGS_ACTIVE: Final = 1
+CAMERA_TRACKING_STATUS_FLAGS_ERROR: Final = 2
+UINT16_MAX: Final = 65535
+
+T = TypeVar("T")
+
+
+def validate_url(url: str) -> str:
+    """A MAVSDK connection URL, checked: ``udpin://host:port``, ``udpout://host:port``,
+    ``tcp(in|out)://host:port`` (``tcp://`` is deprecated in 4.1 but works) or
+    ``serial:///dev/tty...:baud``. Raises ``ConfigError`` with the bad URL otherwise."""
+    parts = urlsplit(url)
+    if parts.scheme not in URL_SCHEMES:
+        raise ConfigError(
+            f"vehicle URL {url!r}: scheme must be one of {', '.join(URL_SCHEMES)} "
+            "(e.g. udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600)"
+        )
+    if parts.scheme == "serial":
+        path, _, baud = parts.path.rpartition(":")
+        if not path or not baud.isdigit():
+            raise ConfigError(f"vehicle URL {url!r}: expected serial:///dev/<device>:<baud>")
+        return url
+    try:
+        port = parts.port
+    except ValueError as exc:
+        raise ConfigError(f"vehicle URL {url!r}: bad port") from exc
+    if port is None or parts.hostname is None:
+        raise ConfigError(f"vehicle URL {url!r}: expected {parts.scheme}://<host>:<port>")
+    return url
+
+
+_LOG_LEVELS: Final = {
+    LogLevel.DEBUG: logging.DEBUG,
+    LogLevel.INFO: logging.INFO,
+    LogLevel.WARN: logging.WARNING,
+    LogLevel.ERROR: logging.ERROR,
+}
+_mavsdk_log = logging.getLogger("mavsdk")
+_log_route_lock = threading.Lock()
+_log_routed = False
+
+
+def route_mavsdk_logs() -> None:
+    """Send libmavsdk's own log lines to the ``mavsdk`` Python logger instead of stdout.
+
+    Process-wide (libmavsdk has one log callback); idempotent.
+    """
+    global _log_routed
+    with _log_route_lock:
+        if _log_routed:
+            return
+
+        def handler(level: LogLevel, message: str, file: str | None, line: int) -> bool:
+            _mavsdk_log.log(_LOG_LEVELS.get(level, logging.INFO), "%s (%s:%d)", message, file, line)
+            return True
+
+        log_subscribe(handler)
+        _log_routed = True
+
+
+class _Broadcast(Generic[T]):
+    """Fan-out of one stream to many async-iterating subscribers, newest kept when one lags."""
+
+    _END: Final = object()
+
+    def __init__(self, name: str, queue_size: int) -> None:
+        self._name = name
+        self._queue_size = queue_size
+        self._queues: set[asyncio.Queue[object]] = set()
+        self._closed = False
+        self.dropped = 0
+
+    def publish(self, item: T) -> None:
+        for queue in self._queues:
+            if queue.full():
+                queue.get_nowait()
+                self.dropped += 1
+                if self.dropped == 1 or self.dropped % 100 == 0:
+                    log.warning("%s: a slow subscriber lost %d items", self._name, self.dropped)
+            queue.put_nowait(item)
+
+    def close(self) -> None:
+        self._closed = True
+        for queue in self._queues:
+            if queue.full():
+                queue.get_nowait()
+            queue.put_nowait(self._END)
+
+    async def subscribe(self) -> AsyncIterator[T]:
+        if self._closed:
+            return
+        queue: asyncio.Queue[object] = asyncio.Queue(self._queue_size)
+        self._queues.add(queue)
+        try:
+            while True:
+                item = await queue.get()
+                if item is self._END:
+                    return
+                yield item  # type: ignore[misc]
+        finally:
+            self._queues.discard(queue)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """How one vehicle link behaves.
+
+    ``autopilot``: force an adapter (None: chosen from what the vehicle reports).
+    ``link_timeout_s``: wall-clock silence after which the link is declared lost.
+    ``camera_component_id``: the component whose CAMERA_TRACKING_GEO_STATUS counts (None: any).
+    ``airborne_altitude_m``: above this height over home the vehicle counts as in the air even
+    before its landed state (EXTENDED_SYS_STATE, often 1 Hz) says so.
+    ``px4_offboard_loss_action``: COM_OBL_RC_ACT to set on PX4 (None: leave it alone).
+    """
+
+    limits: SetpointLimits
+    autopilot: AutopilotName | None = None
+    link_timeout_s: float = 2.0
+    mode_confirm_timeout_s: float = 3.0
+    hold_timeout_s: float = 3.0
+    clock_reset_s: float = 5.0
+    camera_component_id: int | None = MAV_COMP_ID_CAMERA
+    autopilot_component_id: int = MAV_COMP_ID_AUTOPILOT1
+    px4_offboard_loss_action: int | None = 5
+    airborne_altitude_m: float = 5.0
+    hold_on_exit: bool = True
+    queue_size: int = 256
+
+    def __post_init__(self) -> None:
+        for name in ("link_timeout_s", "mode_confirm_timeout_s", "hold_timeout_s", "clock_reset_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        if self.queue_size < 1:
+            raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
+
+
+@dataclass(slots=True)
+class LinkCounters:
+    """What a link dropped or changed, counted (the event log reads these at the end)."""
+
+    frames: int = 0
+    stale_frames: int = 0
+    malformed: int = 0
+    observations: int = 0
+    observations_dropped: int = 0
+    setpoints: int = 0
+    setpoints_limited: int = 0
+    link_losses: int = 0
+    left_offboard: int = 0
+    reasons: dict[str, int] = field(default_factory=dict)
+
+
+def _fields(message: Any) -> dict[str, Any]:
+    loaded = json.loads(message.fields_json)
+    if not isinstance(loaded, dict):
+        raise ValueError(f"fields are not an object: {message.fields_json!r}")
+    return loaded
+
+
+class MavsdkVehicleLink:
+    """One vehicle over MAVSDK; an async context manager that runs its readers in a TaskGroup.
+
+    Built by ``MavsdkHub.link``; see ``app.adapters.vehicle.link.VehicleLink`` for the contract.
+    """
+
+    def __init__(
+        self,
+        system: System,
+        system_id: int,
+        origin: GeodeticOrigin,
+        config: LinkConfig,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._system = system
+        self._id = system_id
+        self._origin = origin
+        self._config = config
+        self._clock = clock
+        self.counters = LinkCounters()
+        self._telemetry: _Broadcast[VehicleTelemetry] = _Broadcast(
+            f"vehicle {system_id} telemetry", config.queue_size
+        )
+        self._observations: _Broadcast[TargetObservation] = _Broadcast(
+            f"vehicle {system_id} observations", config.queue_size
+        )
+        self._events: _Broadcast[LinkEvent] = _Broadcast(
+            f"vehicle {system_id} events", config.queue_size
+        )
+        self._latest: VehicleTelemetry | None = None
+        self._last_rx: float | None = None
+        self._link_ok = False
+        self._mode = "UNKNOWN"
+        self._armed = False
+        self._in_air = False
+        self._global_ok = False
+        self._local_ned: tuple[float, float, float] | None = None
+        self._offboard = "idle"  # idle | starting | active | left
+        self._hold_altitude_m = 0.0
+        self._previous: SentSetpoint | None = None
+        self._limited_burst = False
+        self._changed = asyncio.Condition()
+        self._send_lock = asyncio.Lock()
+        self._stack = AsyncExitStack()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._adapter: AutopilotAdapter | None = None
+
+    # -- properties ------------------------------------------------------------------------
+
+    @property
+    def vehicle_id(self) -> int:
+        return self._id
+
+    @property
+    def autopilot_name(self) -> str:
+        return self._require_adapter().name
+
+    @property
+    def latest(self) -> VehicleTelemetry | None:
+        return self._latest
+
+    @property
+    def link_ok(self) -> bool:
+        return self._link_ok
+
+    @property
+    def flight_mode(self) -> str:
+        return self._mode
+
+    def _require_adapter(self) -> AutopilotAdapter:
+        if self._adapter is None:
+            raise LinkError(f"vehicle {self._id}: link not open (use it as 'async with')")
+        return self._adapter
+
+    # -- lifecycle -------------------------------------------------------------------------
+
+    async def __aenter__(self) -> MavsdkVehicleLink:
+        async with AsyncExitStack() as stack:
+            try:
+                self._tel = TelemetryAsync(self._system)
+                self._action = ActionAsync(self._system)
+                self._offboard_plugin = OffboardAsync(self._system)
+                self._direct = MavlinkDirectAsync(self._system)
+                self._param = ParamAsync(self._system)
+                autopilot = await self._system.autopilot_type()
+                vehicle = await self._system.vehicle_type()
+            except (MavsdkError, RuntimeError) as exc:
+                raise LinkError(f"vehicle {self._id}: cannot open its plugins: {exc}") from exc
+            name = choose_autopilot(autopilot, vehicle, self._config.autopilot, self._id)
+            self._adapter = self._build_adapter(name)
+            log.info(
+                "vehicle %d: autopilot %s, vehicle type %s -> adapter %s",
+                self._id,
+                autopilot.name,
+                vehicle.name,
+                name,
+            )
+            group = await stack.enter_async_context(asyncio.TaskGroup())
+            readers = {
+                "heartbeat": self._read_heartbeat(),
+                "position": self._read_global_position(),
+                "health": self._read_health(),
+                "in-air": self._read_in_air(),
+                "observations": self._read_observations(),
+                "watchdog": self._watchdog(),
+            }
+            if name == "px4-fixed-wing":
+                readers["local-position"] = self._read_local_position()
+            for reader, coro in readers.items():
+                self._tasks.append(group.create_task(coro, name=f"vehicle{self._id}-{reader}"))
+            self._stack = stack.pop_all()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        try:
+            if self._config.hold_on_exit and self._offboard in ("starting", "active"):
+                await self._hold_on_exit(failing=exc is not None)
+        finally:
+            for task in self._tasks:
+                task.cancel()
+            try:
+                suppressed = await self._stack.__aexit__(exc_type, exc, tb)
+            finally:
+                self._telemetry.close()
+                self._observations.close()
+                self._events.close()
+        return suppressed
+
+    async def _hold_on_exit(self, *, failing: bool) -> None:
+        if not self._link_ok:
+            log.warning("vehicle %d: link lost, cannot put it in hold on exit", self._id)
+            return
+        try:
+            async with asyncio.timeout(self._config.hold_timeout_s):
+                await self.hold()
+        except (LinkError, TimeoutError) as exc:
+            log.error("vehicle %d: hold on exit failed: %s", self._id, exc)
+            if not failing:
+                raise LinkError(f"vehicle {self._id}: hold on exit failed: {exc}") from exc
+
+    def _build_adapter(self, name: AutopilotName) -> AutopilotAdapter:
+        limits = self._config.limits
+        if name == "px4-fixed-wing":
+            return Px4FixedWingAdapter(
+                vehicle_id=self._id,
+                offboard=self._offboard_plugin,
+                commands=self._direct,
+                params=self._param,
+                limits=limits,
+                target_component=self._config.autopilot_component_id,
+                offboard_loss_action=self._config.px4_offboard_loss_action,
+            )
+        if name == "arduplane":
+            return ArduPlaneAdapter(
+                vehicle_id=self._id,
+                commands=self._direct,
+                limits=limits,
+                target_component=self._config.autopilot_component_id,
+            )
+        return VelocityAdapter(vehicle_id=self._id, offboard=self._offboard_plugin, limits=limits)
+
+    # -- streams ---------------------------------------------------------------------------
+
+    def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
+        return self._telemetry.subscribe()
+
+    def observations(self) -> AsyncIterator[TargetObservation]:
+        return self._observations.subscribe()
+
+    def events(self) -> AsyncIterator[LinkEvent]:
+        return self._events.subscribe()
+
+    async def _notify(self) -> None:
+        async with self._changed:
+            self._changed.notify_all()
+
+    async def _wait_for(self, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
+        try:
+            async with asyncio.timeout(timeout_s):
+                async with self._changed:
+                    await self._changed.wait_for(predicate)
+        except TimeoutError as exc:
+            raise LinkError(f"vehicle {self._id}: {what} within {timeout_s} s") from exc
+
+    # -- readers (tasks) -------------------------------------------------------------------
+
+    async def _read_heartbeat(self) -> None:
+        adapter = self._require_adapter()
+        async with aclosing(self._direct.subscribe_message("HEARTBEAT")) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    fields = _fields(message)
+                    custom_mode = int(fields["custom_mode"])
+                    base_mode = int(fields["base_mode"])
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("HEARTBEAT", exc)
+                    continue
+                self._mode = adapter.mode_name(custom_mode)
+                self._armed = bool(base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+                if self._offboard == "active" and self._mode != adapter.control_mode:
+                    self._offboard = "left"
+                    self.counters.left_offboard += 1
+                    t_s = self._latest.t_s if self._latest else 0.0
+                    log.error(
+                        "vehicle %d left %s on its own: now in %s",
+                        self._id,
+                        adapter.control_mode,
+                        self._mode,
+                    )
+                    self._events.publish(LeftOffboard(self._id, t_s, self._mode))
+                await self._notify()
+
+    async def _read_global_position(self) -> None:
+        async with aclosing(self._direct.subscribe_message("GLOBAL_POSITION_INT")) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    frame = self._frame(_fields(message))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("GLOBAL_POSITION_INT", exc)
+                    continue
+                if frame is None:
+                    continue
+                self._last_rx = self._clock()
+                if not self._link_ok:
+                    if self._latest is not None:
+                        log.warning("vehicle %d: link restored at t=%.2f", self._id, frame.t_s)
+                        self._events.publish(LinkRestored(self._id, frame.t_s))
+                    self._link_ok = True
+                self._latest = frame
+                self.counters.frames += 1
+                self._telemetry.publish(frame)
+                await self._notify()
+
+    def _frame(self, f: dict[str, Any]) -> VehicleTelemetry | None:
+        t_s = int(f["time_boot_ms"]) / 1000.0
+        previous = self._latest
+        if previous is not None and t_s <= previous.t_s:
+            if previous.t_s - t_s < self._config.clock_reset_s:
+                self.counters.stale_frames += 1
+                return None
+            log.warning("vehicle %d: clock reset %.2f -> %.2f s", self._id, previous.t_s, t_s)
+            self._events.publish(VehicleClockReset(self._id, t_s, previous.t_s))
+            self._previous = None
+        lat = int(f["lat"]) / 1e7
+        lon = int(f["lon"]) / 1e7
+        alt = int(f["alt"]) / 1000.0
+        v_north = int(f["vx"]) / 100.0
+        v_east = int(f["vy"]) / 100.0
+        v_down = int(f["vz"]) / 100.0
+        speed = math.hypot(v_north, v_east)
+        hdg = int(f["hdg"])
+        if speed < 0.5 and hdg != UINT16_MAX:
+            course = math.radians(hdg / 100.0)
+        else:
+            course = course_from_velocity(v_east, v_north)
+        east, north, up = self._origin.to_enu(lat, lon, alt)
+        return VehicleTelemetry(
+            vehicle_id=self._id,
+            t_s=t_s,
+            latitude_deg=lat,
+            longitude_deg=lon,
+            altitude_m=alt,
+            relative_altitude_m=int(f["relative_alt"]) / 1000.0,
+            east_m=east,
+            north_m=north,
+            up_m=up,
+            course_rad=course,
+            ground_speed_m_s=speed,
+            climb_rate_m_s=-v_down,
+            flight_mode=self._mode,
+            armed=self._armed,
+            in_air=self._in_air,
+            link_ok=True,
+        )
+
+    async def _read_local_position(self) -> None:
+        async with aclosing(self._direct.subscribe_message("LOCAL_POSITION_NED")) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    f = _fields(message)
+                    self._local_ned = (float(f["x"]), float(f["y"]), float(f["z"]))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("LOCAL_POSITION_NED", exc)
+
+    async def _read_health(self) -> None:
+        async with aclosing(self._tel.subscribe_health()) as healths:
+            async for health in healths:
+                self._global_ok = bool(health.is_global_position_ok)
+                await self._notify()
+
+    async def _read_in_air(self) -> None:
+        async with aclosing(self._tel.subscribe_in_air()) as states:
+            async for in_air in states:
+                self._in_air = bool(in_air)
+                await self._notify()
+
+    async def _read_observations(self) -> None:
+        wanted = self._config.camera_component_id
+        name = "CAMERA_TRACKING_GEO_STATUS"
+        async with aclosing(self._direct.subscribe_message(name)) as messages:
+            async for message in messages:
+                if wanted is not None and message.component_id != wanted:
+                    continue
+                try:
+                    observation = self._observation(_fields(message))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed(name, exc)
+                    continue
+                if observation is None:
+                    self.counters.observations_dropped += 1
+                    continue
+                self.counters.observations += 1
+                self._observations.publish(observation)
+
+    def _observation(self, f: dict[str, Any]) -> TargetObservation | None:
+        status = int(f["tracking_status"])
+        latest = self._latest
+        if (
+            not status & CAMERA_TRACKING_STATUS_FLAGS_ACTIVE
+            or status & CAMERA_TRACKING_STATUS_FLAGS_ERROR
+            or latest is None
+        ):
+            return None
+        lat = int(f["lat"]) / 1e7
+        lon = int(f["lon"]) / 1e7
+        raw_alt = f.get("alt")
+        alt = float(raw_alt) if raw_alt is not None else self._origin.altitude_m
+        if not math.isfinite(alt):
+            alt = self._origin.altitude_m
+        h_acc = f.get("h_acc")
+        sigma = float(h_acc) if h_acc is not None else None
+        if sigma is not None and not (math.isfinite(sigma) and sigma > 0.0):
+            sigma = None
+        east, north, _ = self._origin.to_enu(lat, lon, alt)
+        return TargetObservation(
+            vehicle_id=self._id,
+            t_s=latest.t_s,
+            latitude_deg=lat,
+            longitude_deg=lon,
+            altitude_m=alt,
+            east_m=east,
+            north_m=north,
+            sigma_m=sigma,
+        )
+
+    async def _watchdog(self) -> None:
+        period = self._config.link_timeout_s / 4.0
+        while True:
+            await asyncio.sleep(period)
+            last = self._last_rx
+            if last is None or not self._link_ok:
+                continue
+            silent = self._clock() - last
+            if silent > self._config.link_timeout_s:
+                self._link_ok = False
+                self.counters.link_losses += 1
+                latest = self._latest
+                t_s = latest.t_s if latest else 0.0
+                log.error("vehicle %d: link lost (no telemetry for %.1f s)", self._id, silent)
+                if latest is not None:
+                    self._latest = replace(latest, link_ok=False)
+                    self._telemetry.publish(self._latest)
+                self._events.publish(LinkLost(self._id, t_s, silent))
+                await self._notify()
+
+    def _malformed(self, what: str, exc: Exception) -> None:
+        self.counters.malformed += 1
+        log.warning("vehicle %d: malformed %s dropped: %s", self._id, what, exc)
+
+    # -- commands --------------------------------------------------------------------------
+
+    async def wait_ready(self, timeout_s: float) -> VehicleTelemetry:
+        await self._wait_for(
+            lambda: self._latest is not None and self._link_ok and self._global_ok,
+            timeout_s,
+            "no telemetry with a healthy global position",
+        )
+        await self._require_adapter().prepare()
+        latest = self._latest
+        assert latest is not None
+        return latest
+
+    async def arm(self) -> None:
+        if self._armed:
+            return
+        try:
+            await self._action.arm()
+        except ActionError as exc:
+            raise LinkError(f"vehicle {self._id}: arm refused: {exc.result.name}") from exc
+
+    def _airborne(self) -> bool:
+        latest = self._latest
+        return self._in_air or (
+            latest is not None and latest.relative_altitude_m > self._config.airborne_altitude_m
+        )
+
+    async def take_off(self, timeout_s: float) -> None:
+        if self._airborne():
+            return
+        try:
+            await self._action.takeoff()
+        except ActionError as exc:
+            raise LinkError(f"vehicle {self._id}: take-off refused: {exc.result.name}") from exc
+        await self._wait_for(self._airborne, timeout_s, "not in the air after take-off")
+
+    def _state(self) -> VehicleState:
+        latest = self._latest
+        if latest is None:
+            raise LinkError(f"vehicle {self._id}: no telemetry yet")
+        return VehicleState(
+            t_s=latest.t_s,
+            course_rad=latest.course_rad,
+            relative_altitude_m=latest.relative_altitude_m,
+            local_ned_m=self._local_ned,
+        )
+
+    async def start_offboard(self, first: CourseSpeedCommand) -> None:
+        adapter = self._require_adapter()
+        async with self._send_lock:
+            state = self._state()
+            self._previous = SentSetpoint(state.t_s, state.course_rad, first.speed_m_s)
+            self._hold_altitude_m = (
+                first.altitude_m if first.altitude_m is not None else state.relative_altitude_m
+            )
+            setpoint = self._limit(first, state.t_s)
+            self._offboard = "starting"
+            try:
+                await adapter.start(setpoint, self._altitude(setpoint), state)
+                self._record(setpoint, state.t_s)
+                await self._wait_for(
+                    lambda: self._mode == adapter.control_mode,
+                    self._config.mode_confirm_timeout_s,
+                    f"accepted {adapter.control_mode} but reports {self._mode}",
+                )
+            except BaseException:
+                self._offboard = "idle"
+                raise
+            self._offboard = "active"
+
+    def _altitude(self, command: CourseSpeedCommand) -> float:
+        if command.altitude_m is not None:
+            self._hold_altitude_m = command.altitude_m
+        return self._hold_altitude_m
+
+    def _limit(self, command: CourseSpeedCommand, t_s: float) -> CourseSpeedCommand:
+        limited, reasons = limit_setpoint(command, t_s, self._previous, self._config.limits)
+        if reasons:
+            self.counters.setpoints_limited += 1
+            for reason in reasons:
+                key = reason.split(" ", 2)[0] + " " + reason.split(" ", 2)[1]
+                self.counters.reasons[key] = self.counters.reasons.get(key, 0) + 1
+            level = logging.DEBUG if self._limited_burst else logging.WARNING
+            log.log(
+                level,
+                "vehicle %d: setpoint limited (%d so far): %s",
+                self._id,
+                self.counters.setpoints_limited,
+                "; ".join(reasons),
+            )
+            self._events.publish(
+                SetpointLimited(self._id, t_s, "; ".join(reasons), self.counters.setpoints_limited)
+            )
+        self._limited_burst = bool(reasons)
+        return limited
+
+    def _record(self, setpoint: CourseSpeedCommand, t_s: float) -> None:
+        self._previous = SentSetpoint(t_s, setpoint.course_rad, setpoint.speed_m_s)
+        self.counters.setpoints += 1
+
+    async def send(self, command: CourseSpeedCommand) -> None:
+        adapter = self._require_adapter()
+        async with self._send_lock:
+            if self._offboard == "left":
+                raise OffboardLostError(
+                    f"vehicle {self._id} left {adapter.control_mode} (now {self._mode}); "
+                    "call start_offboard again to take it back"
+                )
+            if self._offboard != "active":
+                raise LinkError(f"vehicle {self._id}: start_offboard before send")
+            state = self._state()
+            setpoint = self._limit(command, state.t_s)
+            await adapter.send(setpoint, self._altitude(setpoint), state)
+            self._record(setpoint, state.t_s)
+
+    async def hold(self) -> None:
+        adapter = self._require_adapter()
+        async with self._send_lock:
+            await adapter.stop()
+            self._offboard = "idle"
+
+
+class MavsdkHub:
+    """One Mavsdk instance with one or many connections, handing out a link per system id.
+
+    ::
+
+        async with MavsdkHub(["udpin://0.0.0.0:14540", "udpin://0.0.0.0:14541"], origin) as hub:
+            async with hub.link(1, config) as v1, hub.link(2, config) as v2:
+                ...
+    """
+
+    def __init__(
+        self,
+        urls: Iterable[str],
+        origin: GeodeticOrigin,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        route_logs: bool = True,
+    ) -> None:
+        self._urls = [validate_url(url) for url in urls]
+        if not self._urls:
+            raise ConfigError("at least one vehicle connection URL is needed")
+        self._origin = origin
+        self._clock = clock
+        self._route_logs = route_logs
+        self._mavsdk: Mavsdk | None = None
+
+    async def __aenter__(self) -> MavsdkHub:
+        if self._route_logs:
+            route_mavsdk_logs()
+        mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        try:
+            for url in self._urls:
+                await mavsdk.add_any_connection(url)
+        except MavsdkConnectionError as exc:
+            mavsdk.destroy()
+            raise LinkError(f"cannot open vehicle connection {url}: {exc}") from exc
+        except BaseException:
+            mavsdk.destroy()
+            raise
+        self._mavsdk = mavsdk
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        mavsdk, self._mavsdk = self._mavsdk, None
+        if mavsdk is not None:
+            mavsdk.destroy()
+
+    async def system(self, system_id: int, timeout_s: float) -> System:
+        """The autopilot system with this MAVLink system id, waited for up to ``timeout_s``."""
+        mavsdk = self._mavsdk
+        if mavsdk is None:
+            raise LinkError("hub not open (use it as 'async with')")
+        try:
+            async with asyncio.timeout(timeout_s):
+                while True:
+                    for system in await mavsdk.get_systems():
+                        if (
+                            await system.get_system_id() == system_id
+                            and await system.has_autopilot()
+                        ):
+                            return system
+                    await asyncio.sleep(0.1)
+        except TimeoutError as exc:
+            raise LinkError(
+                f"no autopilot with system id {system_id} on {', '.join(self._urls)} "
+                f"within {timeout_s} s"
+            ) from exc
+
+    async def system_ids(self) -> list[int]:
+        """The system ids of the autopilots seen so far."""
+        mavsdk = self._mavsdk
+        if mavsdk is None:
+            raise LinkError("hub not open (use it as 'async with')")
+        return sorted(
+            [await s.get_system_id() for s in await mavsdk.get_systems() if await s.has_autopilot()]
+        )
+
+    @asynccontextmanager
+    async def link(
+        self, system_id: int, config: LinkConfig, *, timeout_s: float = 10.0
+    ) -> AsyncIterator[MavsdkVehicleLink]:
+        """A link to one vehicle, open for the ``async with`` block (holds the vehicle on exit)."""
+        system = await self.system(system_id, timeout_s)
+        async with MavsdkVehicleLink(system, system_id, self._origin, config, self._clock) as link:
+            yield link
+
+
+@asynccontextmanager
+async def open_vehicle_links(
+    urls: Iterable[str],
+    origin: GeodeticOrigin,
+    configs: dict[int, LinkConfig],
+    *,
+    timeout_s: float = 10.0,
+    clock: Callable[[], float] = time.monotonic,
+) -> AsyncIterator[dict[int, MavsdkVehicleLink]]:
+    """Links to several vehicles (system id -> config) through one hub, all open at once."""
+    async with MavsdkHub(urls, origin, clock=clock) as hub, AsyncExitStack() as stack:
+        links: dict[int, MavsdkVehicleLink] = {}
+        for system_id, config in configs.items():
+            links[system_id] = await stack.enter_async_context(
+                hub.link(system_id, config, timeout_s=timeout_s)
+            )
+        yield links
+
+
+__all__ = [
+    "LinkConfig",
+    "LinkCounters",
+    "MavsdkHub",
+    "MavsdkVehicleLink",
+    "open_vehicle_links",
+    "route_mavsdk_logs",
+    "validate_url",
+]

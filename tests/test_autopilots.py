@@ -1,0 +1,440 @@
+"""Autopilot adapters and the setpoint limiter: the exact messages each adapter produces,
+checked against recorders of MAVSDK's Offboard / MavlinkDirect / Param plugins."""
+
+import json
+import math
+from typing import Any
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from mavsdk.autopilot import Autopilot
+from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkDirectResult, MavlinkMessage
+from mavsdk.plugins.offboard import OffboardError, OffboardResult
+from mavsdk.plugins.param import ParamError, ParamResult
+from mavsdk.vehicle import Vehicle
+
+from app.adapters.vehicle.autopilots import (
+    ArduPlaneAdapter,
+    Px4FixedWingAdapter,
+    SentSetpoint,
+    SetpointLimits,
+    VehicleState,
+    VelocityAdapter,
+    arduplane_mode_name,
+    choose_autopilot,
+    command_long,
+    course_deg_0_360,
+    limit_setpoint,
+    px4_mode_name,
+)
+from app.adapters.vehicle.link import CourseSpeedCommand, UnsupportedVehicleError
+from app.core.frames import wrap_pi
+from app.errors import LinkError
+
+LIMITS = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+STATE = VehicleState(t_s=12.0, course_rad=0.0, relative_altitude_m=100.0)
+
+
+class OffboardRecorder:
+    def __init__(self, refuse: OffboardResult | None = None) -> None:
+        self.calls: list[tuple[Any, ...]] = []
+        self.refuse = refuse
+
+    async def set_velocity_ned(self, velocity_ned_yaw: Any) -> None:
+        self.calls.append(("velocity", velocity_ned_yaw))
+
+    async def set_position_velocity_ned(self, position_ned_yaw: Any, velocity_ned_yaw: Any) -> None:
+        self.calls.append(("position+velocity", position_ned_yaw, velocity_ned_yaw))
+
+    async def start(self) -> None:
+        if self.refuse is not None:
+            raise OffboardError(self.refuse, "start()")
+        self.calls.append(("start",))
+
+    async def stop(self) -> None:
+        self.calls.append(("stop",))
+
+
+class CommandRecorder:
+    """MavlinkDirect.send_command: records (message name, target ids, fields), acks ``result``."""
+
+    def __init__(self, result: int = 0, error: MavlinkDirectResult | None = None) -> None:
+        self.sent: list[tuple[str, int, int, dict[str, Any]]] = []
+        self.result = result
+        self.error = error
+
+    async def send_command(self, command: MavlinkMessage) -> MavlinkMessage:
+        fields = json.loads(command.fields_json)
+        self.sent.append(
+            (command.message_name, command.target_system_id, command.target_component_id, fields)
+        )
+        if self.error is not None:
+            raise MavlinkDirectError(self.error, "send_command()", command)
+        ack = {"command": fields["command"], "result": self.result}
+        return MavlinkMessage(message_name="COMMAND_ACK", fields_json=json.dumps(ack))
+
+
+class ParamRecorder:
+    def __init__(self, values: dict[str, int], fail: ParamResult | None = None) -> None:
+        self.values = dict(values)
+        self.sets: list[tuple[str, int]] = []
+        self.fail = fail
+
+    async def get_param_int(self, name: str) -> int:
+        if self.fail is not None:
+            raise ParamError(self.fail, "get_param_int()", name)
+        return self.values[name]
+
+    async def set_param_int(self, name: str, value: int) -> None:
+        self.sets.append((name, value))
+        self.values[name] = value
+
+
+def params_of(fields: dict[str, Any]) -> list[float]:
+    return [fields[f"param{i}"] for i in range(1, 8) if f"param{i}" in fields]
+
+
+# ---- values ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("course", "speed", "altitude"),
+    [(math.nan, 12.0, None), (0.0, math.inf, None), (0.0, -1.0, None), (0.0, 12.0, math.nan)],
+)
+def test_command_rejects_non_finite_or_negative_values(course, speed, altitude):
+    with pytest.raises(ValueError, match="must be"):
+        CourseSpeedCommand(course, speed, altitude)
+
+
+def test_limits_reject_inverted_speeds():
+    with pytest.raises(ValueError, match="exceeds"):
+        SetpointLimits(min_speed_m_s=20.0, max_speed_m_s=18.0)
+
+
+# ---- limiter ---------------------------------------------------------------------------------
+
+
+def test_speed_is_clamped_into_the_limits_with_a_reason():
+    low, why_low = limit_setpoint(CourseSpeedCommand(0.0, 3.0), 1.0, None, LIMITS)
+    high, why_high = limit_setpoint(CourseSpeedCommand(0.0, 30.0), 1.0, None, LIMITS)
+    assert (low.speed_m_s, high.speed_m_s) == (10.0, 18.0)
+    assert "below" in why_low[0]
+    assert "above" in why_high[0]
+
+
+def test_a_setpoint_within_limits_passes_unchanged():
+    previous = SentSetpoint(t_s=1.0, course_rad=0.5, speed_m_s=14.0)
+    out, why = limit_setpoint(CourseSpeedCommand(0.55, 14.0, 80.0), 1.5, previous, LIMITS)
+    assert why == ()
+    assert out == CourseSpeedCommand(0.55, 14.0, 80.0)
+
+
+def test_course_turns_no_faster_than_the_rate_limit():
+    previous = SentSetpoint(t_s=10.0, course_rad=0.0, speed_m_s=14.0)
+    out, why = limit_setpoint(CourseSpeedCommand(1.0, 14.0), 10.5, previous, LIMITS)
+    assert out.course_rad == pytest.approx(0.1)  # 0.2 rad/s * 0.5 s
+    assert "course change" in why[0]
+    left, _ = limit_setpoint(CourseSpeedCommand(-1.0, 14.0), 10.5, previous, LIMITS)
+    assert left.course_rad == pytest.approx(-0.1)
+
+
+def test_course_limit_takes_the_short_way_across_pi():
+    previous = SentSetpoint(t_s=0.0, course_rad=3.1, speed_m_s=14.0)
+    # -3.1 is only 0.083 rad away from 3.1, through pi: allowed in 1 s
+    out, why = limit_setpoint(CourseSpeedCommand(-3.1, 14.0), 1.0, previous, LIMITS)
+    assert why == ()
+    assert out.course_rad == pytest.approx(-3.1)
+    # half a turn away: moves 0.2 rad the short way (through pi, increasing)
+    out, _ = limit_setpoint(CourseSpeedCommand(3.1 - math.pi + 0.5, 14.0), 1.0, previous, LIMITS)
+    assert out.course_rad == pytest.approx(wrap_pi(3.1 - 0.2))
+
+
+def test_time_running_backwards_allows_no_course_change():
+    previous = SentSetpoint(t_s=5.0, course_rad=0.3, speed_m_s=14.0)
+    out, why = limit_setpoint(CourseSpeedCommand(0.5, 14.0), 4.0, previous, LIMITS)
+    assert out.course_rad == pytest.approx(0.3)
+    assert why
+
+
+def test_no_course_rate_limit_leaves_course_free():
+    free = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=None)
+    previous = SentSetpoint(t_s=0.0, course_rad=0.0, speed_m_s=14.0)
+    out, why = limit_setpoint(CourseSpeedCommand(2.0, 14.0), 0.0, previous, free)
+    assert (out.course_rad, why) == (2.0, ())
+
+
+@given(
+    course=st.floats(-20.0, 20.0),
+    speed=st.floats(0.0, 100.0),
+    previous_course=st.floats(-math.pi, math.pi),
+    dt=st.floats(-1.0, 5.0),
+)
+def test_limited_setpoints_are_always_within_the_envelope(course, speed, previous_course, dt):
+    previous = SentSetpoint(t_s=10.0, course_rad=previous_course, speed_m_s=14.0)
+    out, _ = limit_setpoint(CourseSpeedCommand(course, speed), 10.0 + dt, previous, LIMITS)
+    assert math.isfinite(out.course_rad)
+    assert -math.pi <= out.course_rad < math.pi
+    assert LIMITS.min_speed_m_s <= out.speed_m_s <= LIMITS.max_speed_m_s
+    turned = abs(wrap_pi(out.course_rad - previous_course))
+    assert turned <= 0.2 * max(dt, 0.0) + 1e-6
+
+
+# ---- mode names and adapter choice -----------------------------------------------------------
+
+
+def test_px4_and_arduplane_mode_names():
+    assert px4_mode_name(6 << 16) == "OFFBOARD"
+    assert px4_mode_name((4 << 16) | (3 << 24)) == "HOLD"
+    assert px4_mode_name((4 << 16) | (5 << 24)) == "RETURN_TO_LAUNCH"
+    assert px4_mode_name(99 << 16).startswith("UNKNOWN")
+    assert arduplane_mode_name(15) == "GUIDED"
+    assert arduplane_mode_name(12) == "LOITER"
+
+
+@pytest.mark.parametrize(
+    ("autopilot", "vehicle", "expected"),
+    [
+        (Autopilot.PX4, Vehicle.FIXED_WING, "px4-fixed-wing"),
+        (Autopilot.PX4, Vehicle.MULTICOPTER, "velocity"),
+        (Autopilot.ARDUPILOT, Vehicle.FIXED_WING, "arduplane"),
+        (Autopilot.GENERIC, Vehicle.FIXED_WING, "velocity"),
+    ],
+)
+def test_adapter_is_chosen_from_what_the_vehicle_reports(autopilot, vehicle, expected):
+    assert choose_autopilot(autopilot, vehicle, None, 1) == expected
+
+
+def test_configured_adapter_wins_over_the_report():
+    assert choose_autopilot(Autopilot.PX4, Vehicle.FIXED_WING, "velocity", 1) == "velocity"
+
+
+@pytest.mark.parametrize(
+    ("autopilot", "vehicle"),
+    [
+        (Autopilot.ARDUPILOT, Vehicle.MULTICOPTER),
+        (Autopilot.UNKNOWN, Vehicle.FIXED_WING),
+        (Autopilot.PX4, Vehicle.SUBMARINE),
+    ],
+)
+def test_a_vehicle_without_a_supported_form_is_refused_clearly(autopilot, vehicle):
+    with pytest.raises(UnsupportedVehicleError) as info:
+        choose_autopilot(autopilot, vehicle, None, 3)
+    message = str(info.value)
+    assert "vehicle 3" in message
+    assert autopilot.name in message
+    assert vehicle.name in message
+    assert "before take-off" in message
+    assert isinstance(info.value, LinkError)
+
+
+def test_unknown_configured_adapter_is_refused():
+    with pytest.raises(UnsupportedVehicleError, match="unknown autopilot adapter 'dji'"):
+        choose_autopilot(Autopilot.PX4, Vehicle.FIXED_WING, "dji", 1)  # type: ignore[arg-type]
+
+
+def test_course_in_degrees_wraps_into_0_360():
+    assert course_deg_0_360(-math.pi / 2) == pytest.approx(270.0)
+    assert course_deg_0_360(2 * math.pi) == 0.0
+    assert 0.0 <= course_deg_0_360(-1e-18) < 360.0
+
+
+def test_non_finite_command_parameter_is_never_built():
+    with pytest.raises(LinkError, match="non-finite"):
+        command_long(1, 1, 178, (0.0, math.nan))
+
+
+# ---- velocity --------------------------------------------------------------------------------
+
+
+async def test_velocity_adapter_sends_course_as_velocity_and_yaw_then_starts():
+    offboard = OffboardRecorder()
+    adapter = VelocityAdapter(vehicle_id=2, offboard=offboard, limits=LIMITS)
+    await adapter.start(CourseSpeedCommand(math.pi / 2, 15.0), 100.0, STATE)
+    (kind, velocity), start = offboard.calls
+    assert (kind, start) == ("velocity", ("start",))
+    assert velocity.north_m_s == pytest.approx(0.0, abs=1e-12)
+    assert velocity.east_m_s == pytest.approx(15.0)
+    assert velocity.down_m_s == 0.0
+    assert velocity.yaw_deg == pytest.approx(90.0)
+    await adapter.stop()
+    assert offboard.calls[-1] == ("stop",)
+
+
+async def test_velocity_adapter_climbs_towards_the_altitude_saturated():
+    offboard = OffboardRecorder()
+    adapter = VelocityAdapter(vehicle_id=2, offboard=offboard, limits=LIMITS)
+    await adapter.send(CourseSpeedCommand(math.pi, 12.0), 102.0, STATE)  # 2 m low
+    await adapter.send(CourseSpeedCommand(math.pi, 12.0), 40.0, STATE)  # 60 m high
+    (_, climb), (_, descend) = offboard.calls
+    assert climb.down_m_s == pytest.approx(-1.0)  # 0.5 /s * 2 m, up
+    assert descend.down_m_s == pytest.approx(3.0)  # saturated at 3 m/s
+    assert climb.north_m_s == pytest.approx(-12.0)
+    assert climb.yaw_deg == pytest.approx(-180.0)
+
+
+async def test_refused_offboard_start_is_a_link_error_with_the_result():
+    adapter = VelocityAdapter(
+        vehicle_id=4, offboard=OffboardRecorder(OffboardResult.COMMAND_DENIED), limits=LIMITS
+    )
+    with pytest.raises(
+        LinkError, match="vehicle 4: offboard start refused: COMMAND_DENIED"
+    ) as info:
+        await adapter.start(CourseSpeedCommand(0.0, 14.0), 100.0, STATE)
+    assert isinstance(info.value.__cause__, OffboardError)
+
+
+# ---- PX4 fixed-wing ----------------------------------------------------------------------------
+
+
+def px4(
+    commands: CommandRecorder | None = None,
+    params: ParamRecorder | None = None,
+    offboard_loss_action: int | None = 5,
+) -> tuple[Px4FixedWingAdapter, OffboardRecorder, CommandRecorder, ParamRecorder]:
+    offboard = OffboardRecorder()
+    commands = commands or CommandRecorder()
+    params = params or ParamRecorder({"COM_OBL_RC_ACT": 0})
+    adapter = Px4FixedWingAdapter(
+        vehicle_id=3,
+        offboard=offboard,
+        commands=commands,
+        params=params,
+        limits=LIMITS,
+        offboard_loss_action=offboard_loss_action,
+    )
+    return adapter, offboard, commands, params
+
+
+PX4_STATE = VehicleState(
+    t_s=3.0, course_rad=0.0, relative_altitude_m=100.0, local_ned_m=(100.0, 50.0, -80.0)
+)
+
+
+async def test_px4_sends_a_point_ahead_on_the_course_with_the_course_as_velocity():
+    adapter, offboard, commands, _ = px4()
+    await adapter.start(CourseSpeedCommand(math.pi / 2, 15.0), 110.0, PX4_STATE)
+    (kind, position, velocity), start = offboard.calls
+    assert (kind, start) == ("position+velocity", ("start",))
+    # 15 m/s * 4 s = 60 m ahead, due east of the vehicle's local position
+    assert position.north_m == pytest.approx(100.0)
+    assert position.east_m == pytest.approx(110.0)
+    assert position.down_m == pytest.approx(-90.0)  # 10 m higher than now
+    assert position.yaw_deg == pytest.approx(90.0)
+    assert (velocity.north_m_s, velocity.east_m_s) == (pytest.approx(0.0, abs=1e-12), 15.0)
+    assert velocity.down_m_s == 0.0
+    # airspeed by MAV_CMD_DO_CHANGE_SPEED, exact fields
+    ((name, target_system, target_component, fields),) = commands.sent
+    assert (name, target_system, target_component) == ("COMMAND_LONG", 3, 1)
+    assert fields["command"] == 178
+    assert (fields["target_system"], fields["target_component"]) == (3, 1)
+    assert params_of(fields) == [0.0, 15.0, -1.0, 0.0, 0.0, 0.0, 0.0]
+
+
+async def test_px4_lookahead_has_a_floor():
+    adapter, offboard, _, _ = px4()
+    await adapter.send(CourseSpeedCommand(0.0, 5.0), 100.0, PX4_STATE)
+    _, position, _ = offboard.calls[0]
+    assert position.north_m == pytest.approx(140.0)  # 40 m floor, not 5 * 4 = 20 m
+
+
+async def test_px4_changes_airspeed_only_when_it_changes():
+    adapter, _, commands, _ = px4()
+    for speed in (15.0, 15.05, 15.0, 16.0, 16.0):
+        await adapter.send(CourseSpeedCommand(0.0, speed), 100.0, PX4_STATE)
+    assert [f["param2"] for *_, f in commands.sent] == [15.0, 16.0]
+
+
+async def test_px4_refused_airspeed_is_a_link_error():
+    adapter, _, _, _ = px4(commands=CommandRecorder(result=2))
+    with pytest.raises(LinkError, match="DO_CHANGE_SPEED refused: MAV_RESULT_DENIED"):
+        await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, PX4_STATE)
+
+
+async def test_px4_unanswered_command_is_a_link_error():
+    adapter, _, _, _ = px4(commands=CommandRecorder(error=MavlinkDirectResult.TIMEOUT))
+    with pytest.raises(LinkError, match="no answer \\(TIMEOUT\\)") as info:
+        await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, PX4_STATE)
+    assert isinstance(info.value.__cause__, MavlinkDirectError)
+
+
+async def test_px4_without_local_position_refuses_to_guess():
+    adapter, offboard, _, _ = px4()
+    with pytest.raises(LinkError, match="LOCAL_POSITION_NED"):
+        await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
+    assert offboard.calls == []
+
+
+async def test_px4_sets_the_offboard_loss_action_to_hold():
+    adapter, _, _, params = px4()
+    await adapter.prepare()
+    assert params.sets == [("COM_OBL_RC_ACT", 5)]
+
+
+async def test_px4_leaves_a_correct_offboard_loss_action_alone():
+    adapter, _, _, params = px4(params=ParamRecorder({"COM_OBL_RC_ACT": 5}))
+    await adapter.prepare()
+    assert params.sets == []
+
+
+async def test_px4_offboard_loss_action_unset_means_not_touched():
+    adapter, _, _, params = px4(params=ParamRecorder({}), offboard_loss_action=None)
+    await adapter.prepare()
+    assert params.sets == []
+
+
+async def test_px4_parameter_failure_is_a_link_error():
+    adapter, _, _, _ = px4(params=ParamRecorder({}, fail=ParamResult.TIMEOUT))
+    with pytest.raises(LinkError, match="COM_OBL_RC_ACT: TIMEOUT"):
+        await adapter.prepare()
+
+
+# ---- ArduPlane -------------------------------------------------------------------------------
+
+
+async def test_arduplane_switches_to_guided_then_sends_heading_speed_altitude():
+    commands = CommandRecorder()
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    await adapter.start(CourseSpeedCommand(-math.pi / 2, 15.0), 120.0, STATE)
+    mode, heading, speed, altitude = commands.sent
+    assert mode[:3] == ("COMMAND_LONG", 5, 1)
+    assert mode[3]["command"] == 176
+    assert params_of(mode[3]) == [1.0, 15.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    assert heading[:3] == ("COMMAND_INT", 5, 1)
+    assert heading[3]["command"] == 43002
+    assert heading[3]["param1"] == 0.0  # course over ground
+    assert heading[3]["param2"] == pytest.approx(270.0)
+    assert heading[3]["param3"] == pytest.approx(3.0)  # 15 m/s * 0.2 rad/s
+    assert speed[3]["command"] == 43000
+    assert (speed[3]["param1"], speed[3]["param2"], speed[3]["param3"]) == (0.0, 15.0, 2.0)
+    assert altitude[3]["command"] == 43001
+    assert altitude[3]["frame"] == 3  # MAV_FRAME_GLOBAL_RELATIVE_ALT
+    assert altitude[3]["z"] == 120.0
+    assert altitude[3]["param3"] == 3.0
+
+
+async def test_arduplane_sends_only_what_changed():
+    commands = CommandRecorder()
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
+    await adapter.send(CourseSpeedCommand(math.radians(0.2), 15.05, None), 100.2, STATE)
+    assert len(commands.sent) == 3
+    await adapter.send(CourseSpeedCommand(math.radians(5.0), 15.05), 100.2, STATE)
+    assert [f["command"] for *_, f in commands.sent[3:]] == [43002]
+    assert commands.sent[3][3]["param2"] == pytest.approx(5.0)
+
+
+async def test_arduplane_refusal_names_the_command_and_result():
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=CommandRecorder(result=4), limits=LIMITS)
+    with pytest.raises(
+        LinkError, match="vehicle 5: mode change to GUIDED refused: MAV_RESULT_FAILED"
+    ):
+        await adapter.start(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
+
+
+async def test_arduplane_stop_loiters():
+    commands = CommandRecorder()
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    await adapter.stop()
+    ((_, _, _, fields),) = commands.sent
+    assert (fields["command"], fields["param1"], fields["param2"]) == (176, 1.0, 12.0)
