@@ -1,0 +1,474 @@
+"""One vehicle's decision step: guidance (field, optimal c, ILVF switch, lag compensation,
+moving-target correction) and phase keeping, as a pure ``agent_step(state, inputs, params)``.
+
+Everything the step needs arrives in ``AgentInputs`` (own telemetry, the target's position and
+velocity, the team's positions) and ``AgentParams``; everything it remembers is in the returned
+``AgentState``. The same function is driven by the fast numerical simulation, an in-process
+async run and the live mission. Later parts add fields (an estimator's state, a mission stage)
+with defaults, so callers that do not know them keep working.
+"""
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+from app.core import guidance, phase
+
+GuidanceLaw = Literal["proposed", "frew", "fixed"]
+PhaseLaw = Literal["paper", "frew", "none"]
+Orbit = Literal["ccw", "cw"]
+FieldMode = Literal["field", "inverse"]
+
+FREW_C = 2.0
+
+
+def _require_positive(owner: str, **values: float) -> None:
+    for name, value in values.items():
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{owner}.{name} must be finite and > 0, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleEnvelope:
+    """What the guidance may ask of the vehicle (Table 1): speeds m/s, acceleration m/s^2, course
+    rate rad/s, and k of eq. (2) (1/s), the autopilot's course-loop gain that the lag
+    compensation assumes."""
+
+    cruise_speed_m_s: float
+    min_speed_m_s: float
+    max_speed_m_s: float
+    max_accel_m_s2: float
+    max_course_rate_rad_s: float
+    course_gain_per_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        _require_positive(
+            "VehicleEnvelope",
+            cruise_speed_m_s=self.cruise_speed_m_s,
+            min_speed_m_s=self.min_speed_m_s,
+            max_speed_m_s=self.max_speed_m_s,
+            max_accel_m_s2=self.max_accel_m_s2,
+            max_course_rate_rad_s=self.max_course_rate_rad_s,
+            course_gain_per_s=self.course_gain_per_s,
+        )
+        if not self.min_speed_m_s <= self.cruise_speed_m_s <= self.max_speed_m_s:
+            raise ValueError(
+                "VehicleEnvelope needs min_speed_m_s <= cruise_speed_m_s <= max_speed_m_s, got "
+                f"{self.min_speed_m_s}, {self.cruise_speed_m_s}, {self.max_speed_m_s}"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class GuidanceParams:
+    """Which field and how it is flown.
+
+    ``law``: ``proposed`` (optimal c, section 4.1, recomputed as speed changes, with the ILVF
+    switch), ``frew`` (c = 2) or ``fixed`` (c = ``c``). ``feed_forward``: lag compensation of the
+    course command (``guidance.course_command``); False is the paper's literal eq. (2) loop.
+    ``curvature_margin``: fraction of the course-rate limit the optimal c may use.
+    ``inverse_field``: the ILVF switch (default: on for ``proposed`` only).
+    """
+
+    radius_m: float
+    orbit: Orbit = "ccw"
+    law: GuidanceLaw = "proposed"
+    c: float | None = None
+    feed_forward: bool = True
+    curvature_margin: float = 1.0
+    inverse_field: bool | None = None
+    c_update_speed_step_m_s: float = 0.1
+    switch_check_period_s: float = 0.2
+    switch_enter_below_m: float = 0.0
+    switch_leave_above_m: float = 0.5
+    #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
+    orbit_sign: int = field(init=False, repr=False)
+    #: whether the ILVF switch is used (derived from ``law`` and ``inverse_field``)
+    uses_inverse_field: bool = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _require_positive(
+            "GuidanceParams",
+            radius_m=self.radius_m,
+            c_update_speed_step_m_s=self.c_update_speed_step_m_s,
+            switch_check_period_s=self.switch_check_period_s,
+        )
+        if self.orbit not in ("ccw", "cw"):
+            raise ValueError(f"GuidanceParams.orbit must be 'ccw' or 'cw', got {self.orbit!r}")
+        if self.law not in ("proposed", "frew", "fixed"):
+            raise ValueError(f"GuidanceParams.law must be proposed|frew|fixed, got {self.law!r}")
+        if self.law == "fixed" and self.c is None:
+            raise ValueError("GuidanceParams: law 'fixed' needs c")
+        if self.c is not None:
+            _require_positive("GuidanceParams", c=self.c)
+        if not (math.isfinite(self.curvature_margin) and 0.0 < self.curvature_margin <= 1.0):
+            raise ValueError(
+                f"GuidanceParams.curvature_margin must be in (0, 1], got {self.curvature_margin!r}"
+            )
+        uses_inverse = self.law == "proposed" if self.inverse_field is None else self.inverse_field
+        object.__setattr__(self, "orbit_sign", 1 if self.orbit == "ccw" else -1)
+        object.__setattr__(self, "uses_inverse_field", uses_inverse)
+
+
+@dataclass(frozen=True, slots=True)
+class PhaseParams:
+    """Phase keeping by speed: ``paper`` (seat law, eq. 24-28), ``frew`` (neighbour law) or
+    ``none`` (cruise). ``gain_per_s`` is k of eq. (24). With ``predictive`` the law steers on the
+    phase each vehicle will have when it reaches the circle (``phase.arrival_phase_lead``) and
+    drops the (r_d / r)^2 weight."""
+
+    law: PhaseLaw = "paper"
+    gain_per_s: float = 0.05
+    predictive: bool = False
+
+    def __post_init__(self) -> None:
+        if self.law not in ("paper", "frew", "none"):
+            raise ValueError(f"PhaseParams.law must be paper|frew|none, got {self.law!r}")
+        if not (math.isfinite(self.gain_per_s) and self.gain_per_s >= 0.0):
+            raise ValueError(f"PhaseParams.gain_per_s must be finite and >= 0: {self.gain_per_s}")
+
+
+@dataclass(frozen=True, slots=True)
+class AgentParams:
+    """Fixed configuration of one vehicle's agent. ``index`` is the vehicle's place in
+    ``AgentInputs.team_positions`` (0-based; MAVLink system id index + 1)."""
+
+    index: int
+    envelope: VehicleEnvelope
+    guidance: GuidanceParams
+    phase: PhaseParams = PhaseParams()
+
+    def __post_init__(self) -> None:
+        if self.index < 0:
+            raise ValueError(f"AgentParams.index must be >= 0, got {self.index}")
+
+
+@dataclass(frozen=True, slots=True)
+class OwnTelemetry:
+    """The vehicle's own state: metres east/north of the origin, course (rad, clockwise from
+    north), ground speed m/s."""
+
+    east_m: float
+    north_m: float
+    course_rad: float
+    speed_m_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class TargetInfo:
+    """The target as the agent knows it (truth or an estimate): position m, velocity m/s,
+    acceleration m/s^2, east/north."""
+
+    east_m: float
+    north_m: float
+    v_east_m_s: float = 0.0
+    v_north_m_s: float = 0.0
+    a_east_m_s2: float = 0.0
+    a_north_m_s2: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class AgentInputs:
+    """One tick's inputs. ``team_positions[j]`` is vehicle j's (east_m, north_m); the agent's own
+    entry is replaced by its telemetry. An empty tuple (or a team of one) means no phase keeping.
+    """
+
+    t_s: float
+    own: OwnTelemetry
+    target: TargetInfo
+    team_positions: tuple[tuple[float, float], ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class AgentState:
+    """What the agent remembers between ticks.
+
+    ``mode``: flying the ordinary field or the inverse one. ``c`` and ``c_speed_m_s``: the
+    guidance parameter and the speed it was computed for (``c_speed_m_s = 0``: not yet).
+    ``next_switch_check_t_s``: when the ILVF rule is next evaluated.
+    """
+
+    mode: FieldMode = "field"
+    c: float = FREW_C
+    c_speed_m_s: float = 0.0
+    next_switch_check_t_s: float = -math.inf
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """What the autopilot adapter turns into setpoints.
+
+    ``course_rad`` (clockwise from north) is lag-compensated for the eq. (2) loop;
+    ``field_course_rad`` is the uncompensated desired ground course and
+    ``course_rate_ff_rad_s`` its rate along the vehicle's motion (for adapters that take a rate).
+    ``speed_m_s`` is the ground-speed command within the envelope.
+    """
+
+    course_rad: float
+    speed_m_s: float
+    field_course_rad: float
+    course_rate_ff_rad_s: float
+    c: float
+    inverse: bool
+
+
+@dataclass(frozen=True, slots=True)
+class AgentEvent:
+    """Something worth logging: ``kind`` is a short fixed word, ``detail`` free text."""
+
+    t_s: float
+    kind: str
+    detail: str = ""
+
+
+_NO_EVENTS: tuple[AgentEvent, ...] = ()
+
+
+def _check_inputs(inputs: AgentInputs) -> None:
+    own, tgt = inputs.own, inputs.target
+    total = (
+        inputs.t_s
+        + own.east_m
+        + own.north_m
+        + own.course_rad
+        + own.speed_m_s
+        + tgt.east_m
+        + tgt.north_m
+        + tgt.v_east_m_s
+        + tgt.v_north_m_s
+        + tgt.a_east_m_s2
+        + tgt.a_north_m_s2
+    )
+    for e, n in inputs.team_positions:
+        total += e + n
+    # a sum of finite floats is finite (short of overflow); a NaN or inf anywhere is not
+    if math.isfinite(total):
+        if own.speed_m_s < 0.0:
+            raise ValueError(f"agent input own.speed_m_s must be >= 0, got {own.speed_m_s!r}")
+        return
+    named = {
+        "t_s": inputs.t_s,
+        "own.east_m": own.east_m,
+        "own.north_m": own.north_m,
+        "own.course_rad": own.course_rad,
+        "own.speed_m_s": own.speed_m_s,
+        "target.east_m": tgt.east_m,
+        "target.north_m": tgt.north_m,
+        "target.v_east_m_s": tgt.v_east_m_s,
+        "target.v_north_m_s": tgt.v_north_m_s,
+        "target.a_east_m_s2": tgt.a_east_m_s2,
+        "target.a_north_m_s2": tgt.a_north_m_s2,
+    }
+    for j, (e, n) in enumerate(inputs.team_positions):
+        named[f"team_positions[{j}]"] = e + n
+    for name, value in named.items():
+        if not math.isfinite(value):
+            raise ValueError(f"agent input {name} must be finite, got {value!r}")
+    raise ValueError("agent inputs overflow to a non-finite sum")
+
+
+def _guidance_c(state: AgentState, params: AgentParams, speed_m_s: float) -> AgentState:
+    g = params.guidance
+    if g.law == "frew":
+        c = FREW_C
+    elif g.law == "fixed":
+        assert g.c is not None  # checked in GuidanceParams
+        c = g.c
+    else:
+        # design for the speed rounded up to the update step, so that the field stays flyable
+        # at every speed up to the one it was computed for
+        step = g.c_update_speed_step_m_s
+        design_speed = math.ceil(speed_m_s / step - 1e-9) * step
+        if design_speed == state.c_speed_m_s:
+            return state
+        env = params.envelope
+        c = guidance.optimal_c(
+            g.radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin
+        )
+        return replace(state, c=c, c_speed_m_s=design_speed)
+    if c == state.c and state.c_speed_m_s > 0.0:
+        return state
+    return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9))
+
+
+def _speed_command(inputs: AgentInputs, params: AgentParams, state: AgentState) -> float:
+    env, ph, g = params.envelope, params.phase, params.guidance
+    team = inputs.team_positions
+    if ph.law == "none" or len(team) < 2 or ph.gain_per_s == 0.0:
+        return env.cruise_speed_m_s
+    if not 0 <= params.index < len(team):
+        raise ValueError(f"vehicle index {params.index} outside a team of {len(team)}")
+    tx, ty, sign = inputs.target.east_m, inputs.target.north_m, g.orbit_sign
+    phases: list[float] = []
+    own_r = 0.0
+    for j, (e, n) in enumerate(team):
+        if j == params.index:
+            e, n = inputs.own.east_m, inputs.own.north_m
+        x, y = e - tx, n - ty
+        theta = sign * math.atan2(y, x)
+        r = math.hypot(x, y)
+        if ph.predictive:
+            theta += phase.arrival_phase_lead(r, g.radius_m, state.c)
+        if j == params.index:
+            own_r = r
+        phases.append(theta)
+    if ph.law == "paper":
+        error = phase.seat_errors(phases)[params.index]
+    else:
+        error = phase.neighbour_errors(phases)[params.index]
+    return phase.phase_speed(
+        error,
+        own_r,
+        g.radius_m,
+        env.cruise_speed_m_s,
+        ph.gain_per_s,
+        env.min_speed_m_s,
+        env.max_speed_m_s,
+        distance_weight=not ph.predictive,
+    )
+
+
+def agent_step(
+    state: AgentState, inputs: AgentInputs, params: AgentParams
+) -> tuple[AgentState, Command, tuple[AgentEvent, ...]]:
+    """One control tick for one vehicle: (state, inputs, params) -> (state, command, events).
+
+    1. c: the optimal c of section 4.1 for the vehicle's current speed (recomputed when the
+       speed has moved by ``c_update_speed_step_m_s``), 2 for Frew's field, or the fixed c.
+    2. ILVF switch (law ``proposed``): every ``switch_check_period_s``, outside the circle,
+       predict the smallest r - r_d of flying the ordinary field from here
+       (``guidance.predict_min_distance_error``) and apply ``guidance.inverse_field_wanted``.
+       Inside the circle the ordinary field (which leads out to it) is always flown. The check
+       is skipped when it cannot matter: far outside (> 2.2 turn radii) or already aligned with a
+       flyable field.
+    3. Speed: cruise, or the phase law's speed (eq. 27) from the team's phases.
+    4. Course: the field direction in the target's frame (eq. 8/14), corrected for the target's
+       motion (eq. 15) to a ground velocity at the commanded speed, and lag-compensated with the
+       ground course's own rate (``guidance.course_command``).
+
+    Pure: never mutates its arguments; returns ``state`` itself when nothing changed. Raises
+    ``ValueError`` on non-finite inputs. The command is always finite, its speed within the
+    envelope, its implied course rate k * (command - course) within the course-rate limit.
+    """
+    _check_inputs(inputs)
+    env, g = params.envelope, params.guidance
+    own, tgt = inputs.own, inputs.target
+    sign = g.orbit_sign
+    k, w = env.course_gain_per_s, env.max_course_rate_rad_s
+    speed_now = own.speed_m_s if own.speed_m_s > 0.0 else env.cruise_speed_m_s
+    new_state = _guidance_c(state, params, speed_now)
+    c = new_state.c
+
+    x, y = own.east_m - tgt.east_m, own.north_m - tgt.north_m
+    vx = own.speed_m_s * math.sin(own.course_rad) - tgt.v_east_m_s
+    vy = own.speed_m_s * math.cos(own.course_rad) - tgt.v_north_m_s
+    rd = g.radius_m
+    events = _NO_EVENTS
+
+    if g.uses_inverse_field and inputs.t_s >= new_state.next_switch_check_t_s:
+        new_state, events = _switch_rule(new_state, inputs, params, x, y, vx, vy, c)
+
+    inverse = new_state.mode == "inverse"
+    rel_course, rel_rate = guidance._course_and_rate(x, y, vx, vy, rd, c, sign, inverse)
+    speed_cmd = _speed_command(inputs, params, new_state)
+
+    if (
+        tgt.v_east_m_s == 0.0
+        and tgt.v_north_m_s == 0.0
+        and tgt.a_east_m_s2 == 0.0
+        and (tgt.a_north_m_s2 == 0.0)
+    ):
+        ground_course, ground_rate = rel_course, rel_rate
+    else:
+        ground_course, ground_rate, speed_cmd = _ground_course(
+            rel_course, rel_rate, tgt, speed_cmd, env
+        )
+
+    cmd_course = guidance._course_command(
+        own.course_rad, ground_course, ground_rate, k, w, g.feed_forward
+    )
+    command = Command(
+        course_rad=cmd_course,
+        speed_m_s=speed_cmd,
+        field_course_rad=ground_course,
+        course_rate_ff_rad_s=ground_rate,
+        c=c,
+        inverse=inverse,
+    )
+    return new_state, command, events
+
+
+def _switch_rule(
+    state: AgentState,
+    inputs: AgentInputs,
+    params: AgentParams,
+    x: float,
+    y: float,
+    vx: float,
+    vy: float,
+    c: float,
+) -> tuple[AgentState, tuple[AgentEvent, ...]]:
+    g, env = params.guidance, params.envelope
+    rd, sign = g.radius_m, g.orbit_sign
+    w, k = env.max_course_rate_rad_s, env.course_gain_per_s
+    next_check = inputs.t_s + g.switch_check_period_s
+    r = math.hypot(x, y)
+    rel_speed = math.hypot(vx, vy)
+    using_inverse = state.mode == "inverse"
+    if r <= rd or rel_speed <= 0.0:
+        wanted = False
+    else:
+        rel_course = math.atan2(vx, vy)
+        turn_radius = rel_speed / w
+        skip = False
+        if not using_inverse:
+            if r - rd > 2.2 * turn_radius:
+                skip = True
+            else:
+                f_course, _ = guidance._course_and_rate(x, y, vx, vy, rd, c, sign, False)
+                flyable = guidance.peak_curvature(rd, c)[0] <= w / rel_speed * (1.0 + 1e-9)
+                skip = flyable and abs(guidance._wrap_pi(f_course - rel_course)) < 0.01
+        if skip:
+            wanted = False
+        else:
+            predicted = guidance.predict_min_distance_error(
+                x, y, rel_course, rel_speed, rd, c, k, w, sign, g.feed_forward
+            )
+            wanted = guidance.inverse_field_wanted(
+                using_inverse, predicted, g.switch_enter_below_m, g.switch_leave_above_m
+            )
+    mode: FieldMode = "inverse" if wanted else "field"
+    events = _NO_EVENTS
+    if wanted != using_inverse:
+        kind = "inverse-field-on" if wanted else "inverse-field-off"
+        events = (AgentEvent(inputs.t_s, kind, f"r - r_d = {r - rd:.1f} m"),)
+    return replace(state, mode=mode, next_switch_check_t_s=next_check), events
+
+
+def _ground_course(
+    rel_course: float,
+    rel_rate: float,
+    tgt: TargetInfo,
+    speed_cmd: float,
+    env: VehicleEnvelope,
+) -> tuple[float, float, float]:
+    """Eq. (15): ground velocity v_g = v_t + lambda d at the commanded speed, its course and the
+    course's rate (d turning at ``rel_rate``, the target accelerating, |v_g| held constant)."""
+    dx, dy = math.sin(rel_course), math.cos(rel_course)
+    gx, gy, lam = guidance._moving_target_velocity(
+        dx, dy, tgt.v_east_m_s, tgt.v_north_m_s, speed_cmd, env.min_speed_m_s, env.max_speed_m_s
+    )
+    # d/dt d = rel_rate * (cos chi, -sin chi)
+    px, py = rel_rate * dy, -rel_rate * dx
+    ax = tgt.a_east_m_s2 + lam * px
+    ay = tgt.a_north_m_s2 + lam * py
+    along = gx * dx + gy * dy
+    if abs(along) > 1e-6:
+        lam_dot = -(gx * ax + gy * ay) / along
+        ax += lam_dot * dx
+        ay += lam_dot * dy
+    g2 = gx * gx + gy * gy
+    if g2 <= 1e-12:
+        return rel_course, 0.0, env.min_speed_m_s
+    course = math.atan2(gx, gy)
+    rate = (gy * ax - gx * ay) / g2
+    return course, rate, math.sqrt(g2)

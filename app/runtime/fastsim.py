@@ -1,0 +1,242 @@
+"""The fast numerical simulation: ``agent_step`` for n vehicles driving the eq. (2) fixed-wing of
+``sitl.fixedwing`` around a ``sitl.target`` path, in fixed steps, no asyncio, no clock.
+
+Each step, every agent sees the team's positions at the start of the step (a synchronous,
+loss-free exchange), the true target state and its own telemetry; its command is then held
+over the step by ``sitl.fixedwing.step``. Figures of merit (settle time, crossings, phase
+spacing) are pure functions of the result.
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.core.agent import (
+    AgentEvent,
+    AgentInputs,
+    AgentParams,
+    AgentState,
+    OwnTelemetry,
+    TargetInfo,
+    agent_step,
+)
+from sitl.fixedwing import FixedWingLimits, FixedWingState, step
+from sitl.target import TargetPath
+
+FloatArray = NDArray[np.float64]
+TAU = 2.0 * math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class SimulationSetup:
+    """Everything a run needs: starts and agent parameters per vehicle (same order), the shared
+    vehicle limits, the target's path, the step and the duration (s)."""
+
+    starts: tuple[FixedWingState, ...]
+    agents: tuple[AgentParams, ...]
+    limits: FixedWingLimits
+    target: TargetPath
+    dt_s: float = 0.01
+    duration_s: float = 400.0
+
+    def __post_init__(self) -> None:
+        if not self.starts:
+            raise ValueError("a simulation needs at least one vehicle")
+        if len(self.starts) != len(self.agents):
+            raise ValueError(
+                f"{len(self.starts)} starts but {len(self.agents)} agent parameter sets"
+            )
+        for i, agent in enumerate(self.agents):
+            if agent.index != i:
+                raise ValueError(f"agent {i} has index {agent.index}; indices must be 0..n-1")
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0.0):
+            raise ValueError(f"dt_s must be finite and > 0, got {self.dt_s!r}")
+        if not (math.isfinite(self.duration_s) and self.duration_s >= self.dt_s):
+            raise ValueError(f"duration_s must be finite and >= dt_s, got {self.duration_s!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class SimulationResult:
+    """Sampled run: ``t_s`` shape (m,); per-vehicle arrays shape (m, n); target arrays (m,).
+
+    ``course_rate_rad_s`` and ``accel_m_s2`` at row j are those applied over the step that
+    ended at ``t_s[j]`` (0 in row 0). ``events`` are (vehicle index, event) in time order.
+    """
+
+    t_s: FloatArray
+    east_m: FloatArray
+    north_m: FloatArray
+    course_rad: FloatArray
+    speed_m_s: FloatArray
+    course_rate_rad_s: FloatArray
+    accel_m_s2: FloatArray
+    c: FloatArray
+    inverse: NDArray[np.bool_]
+    target_east_m: FloatArray
+    target_north_m: FloatArray
+    radius_m: float
+    orbit_sign: int
+    events: tuple[tuple[int, AgentEvent], ...]
+
+    @property
+    def n_vehicles(self) -> int:
+        return int(self.east_m.shape[1])
+
+    def distance_error_m(self) -> FloatArray:
+        """r - r_d per sample and vehicle, m (negative inside the circle)."""
+        return (
+            np.hypot(
+                self.east_m - self.target_east_m[:, None],
+                self.north_m - self.target_north_m[:, None],
+            )
+            - self.radius_m
+        )
+
+    def phases_rad(self) -> FloatArray:
+        """Polar angle about the target times the orbit sign (grows along the orbit), rad."""
+        return self.orbit_sign * np.arctan2(
+            self.north_m - self.target_north_m[:, None], self.east_m - self.target_east_m[:, None]
+        )
+
+
+def run_simulation(
+    setup: SimulationSetup, states: Sequence[AgentState] | None = None
+) -> SimulationResult:
+    """Run ``setup`` to its duration and record every step.
+
+    ``states`` are the agents' initial states (default ``AgentState()`` each). The target's state
+    is taken from its path at each step's start; once the path has ended with the target at rest
+    it is held (the path's own semantics), which keeps a long run cheap.
+    """
+    n = len(setup.starts)
+    dt = setup.dt_s
+    steps = round(setup.duration_s / dt)
+    limits = setup.limits
+    agents = setup.agents
+    agent_states = list(states) if states is not None else [AgentState() for _ in range(n)]
+    vehicles = list(setup.starts)
+    rows = steps + 1
+    events: list[tuple[int, AgentEvent]] = []
+
+    path = setup.target
+    rest_after = path.duration_s
+    end_state = path.state_at(rest_after)
+    at_rest = end_state.v_east_m_s == 0.0 and end_state.v_north_m_s == 0.0
+    rest_info = TargetInfo(end_state.east_m, end_state.north_m)
+    team_phase = n > 1
+
+    rec: list[float] = []  # per step: t, target east, north, then 8 values per vehicle
+    info = TargetInfo(0.0, 0.0)
+    for j in range(steps + 1):
+        t = j * dt
+        if at_rest and t >= rest_after:
+            info = rest_info
+        else:
+            ts = path.state_at(t)
+            info = TargetInfo(
+                ts.east_m,
+                ts.north_m,
+                ts.v_east_m_s,
+                ts.v_north_m_s,
+                ts.a_east_m_s2,
+                ts.a_north_m_s2,
+            )
+        team = tuple((v.east_m, v.north_m) for v in vehicles) if team_phase else ()
+        rec += (t, info.east_m, info.north_m)
+        new_vehicles = []
+        for i in range(n):
+            v = vehicles[i]
+            own = OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
+            state, command, evs = agent_step(
+                agent_states[i], AgentInputs(t, own, info, team), agents[i]
+            )
+            agent_states[i] = state
+            rec += (
+                v.east_m,
+                v.north_m,
+                v.course_rad,
+                v.speed_m_s,
+                v.course_rate_rad_s,
+                v.accel_m_s2,
+                command.c,
+                1.0 if command.inverse else 0.0,
+            )
+            if evs:
+                events.extend((i, e) for e in evs)
+            if j < steps:
+                new_vehicles.append(step(v, command.course_rad, command.speed_m_s, limits, dt))
+        if j < steps:
+            vehicles = new_vehicles
+
+    g = agents[0].guidance
+    table = np.asarray(rec, dtype=np.float64).reshape(rows, 3 + 8 * n)
+    per_vehicle = table[:, 3:].reshape(rows, n, 8)
+    return SimulationResult(
+        t_s=table[:, 0].copy(),
+        east_m=per_vehicle[:, :, 0].copy(),
+        north_m=per_vehicle[:, :, 1].copy(),
+        course_rad=per_vehicle[:, :, 2].copy(),
+        speed_m_s=per_vehicle[:, :, 3].copy(),
+        course_rate_rad_s=per_vehicle[:, :, 4].copy(),
+        accel_m_s2=per_vehicle[:, :, 5].copy(),
+        c=per_vehicle[:, :, 6].copy(),
+        inverse=per_vehicle[:, :, 7] > 0.5,
+        target_east_m=table[:, 1].copy(),
+        target_north_m=table[:, 2].copy(),
+        radius_m=g.radius_m,
+        orbit_sign=g.orbit_sign,
+        events=tuple(events),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# figures of merit
+
+
+def settle_time_s(t_s: FloatArray, error: FloatArray, tolerance: float) -> float:
+    """First time after which |error| < tolerance holds to the end of the run (inf if it does
+    not hold at the end). ``error`` shape (m,) or (m, n) (then all columns must hold)."""
+    bad: NDArray[np.bool_] = np.asarray(np.abs(error) >= tolerance)
+    if bad.ndim == 2:
+        bad = np.asarray(bad.any(axis=1))
+    if bad[-1]:
+        return math.inf
+    idx = np.flatnonzero(bad)
+    return float(t_s[0]) if idx.size == 0 else float(t_s[idx[-1] + 1])
+
+
+def circle_crossings(error: FloatArray, depth_m: float = 0.5) -> int:
+    """Times a vehicle enters the circle by more than ``depth_m`` after having been outside it
+    (r - r_d >= 0). Summed over vehicles for shape (m, n)."""
+    cols = error[:, None] if error.ndim == 1 else error
+    total = 0
+    for col in cols.T:
+        outside = col[0] >= 0.0
+        for value in col:
+            if outside and value < -depth_m:
+                total += 1
+                outside = False
+            elif not outside and value >= 0.0:
+                outside = True
+    return total
+
+
+def adjacent_phase_differences(phases_rad: FloatArray) -> FloatArray:
+    """For each sample, the n gaps (rad, in [0, 2 pi)) between each vehicle and the next one
+    ahead along the orbit, in orbit order starting from the vehicle at rank 0; shape (m, n)."""
+    sorted_rel = np.sort((phases_rad - phases_rad[:, :1]) % TAU, axis=1)
+    ahead = np.roll(sorted_rel, -1, axis=1)
+    ahead[:, -1] += TAU
+    return ahead - sorted_rel
+
+
+def phase_settle_time_s(
+    t_s: FloatArray, phases_rad: FloatArray, tolerance_rad: float = math.radians(2.0)
+) -> float:
+    """First time after which every adjacent gap is within ``tolerance_rad`` of 2 pi / n."""
+    n = phases_rad.shape[1]
+    gaps = adjacent_phase_differences(phases_rad)
+    return settle_time_s(t_s, gaps - TAU / n, tolerance_rad)
