@@ -39,8 +39,11 @@ def free_port() -> int:
 class Mosquitto:
     """One mosquitto process with a generated config in ``workdir``."""
 
-    def __init__(self, workdir: Path, *, extra_config: str = "", tls: bool = False) -> None:
+    def __init__(
+        self, workdir: Path, *, extra_config: str = "", tls: bool = False, anonymous: bool = True
+    ) -> None:
         self.workdir = workdir
+        self.anonymous = anonymous
         self.extra_config = extra_config
         self.tls = tls
         self.port = free_port()
@@ -54,8 +57,10 @@ class Mosquitto:
     def config(self) -> str:
         return (
             f"listener {self.port} 127.0.0.1\n"
-            "allow_anonymous true\n"
+            f"allow_anonymous {'true' if self.anonymous else 'false'}\n"
             "persistence false\n"
+            # as root, mosquitto would drop to the "mosquitto" user, who cannot read tmp_path
+            f"{'user root' if os.geteuid() == 0 else ''}\n"
             "log_dest stderr\n"
             "log_type error\nlog_type warning\nlog_type notice\n"
             f"{self.extra_config}"
@@ -77,8 +82,8 @@ class Mosquitto:
             self.stop()
             if attempt < 2 and self.process is not None and self.process.returncode != 0:
                 self.port = free_port()  # lost a race for the port with another process
-        log = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
-        raise RuntimeError(f"mosquitto did not start on port {self.port}:\n{log[-2000:]}")
+        text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+        raise RuntimeError(f"mosquitto did not start on port {self.port}:\n{text[-2000:]}")
 
     def _wait_accepting(self) -> bool:
         deadline = time.monotonic() + START_TIMEOUT_S

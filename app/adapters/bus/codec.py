@@ -42,20 +42,25 @@ def decode(payload: bytes | bytearray | str) -> Message:
         message: Message = _ADAPTER.validate_json(payload, strict=True)
     except ValidationError as exc:
         version = _version_of(payload)
-        if version is not None and version != SCHEMA_VERSION:
+        if version is not _ABSENT and version != SCHEMA_VERSION:
             raise UnsupportedVersion(
                 f"schema version {version!r}, this build speaks {SCHEMA_VERSION}"
             ) from exc
         first = exc.errors()[0]
         where = ".".join(str(part) for part in first["loc"]) or "(payload)"
         raise MalformedMessage(f"{where}: {first['msg']}") from exc
+    if "v" not in message.model_fields_set:  # the model's default is for senders, not the wire
+        raise MalformedMessage("v: the schema version is missing")
     return message
 
 
+_ABSENT = object()
+
+
 def _version_of(payload: bytes | bytearray | str) -> object:
-    """The ``v`` of a JSON object payload, or None when there is no such thing to read."""
+    """The ``v`` of a JSON object payload, or ``_ABSENT`` when there is no such thing to read."""
     try:
         obj = json.loads(payload)
     except (ValueError, UnicodeDecodeError):
-        return None
-    return obj.get("v") if isinstance(obj, dict) else None
+        return _ABSENT
+    return obj.get("v", _ABSENT) if isinstance(obj, dict) else _ABSENT

@@ -8,9 +8,11 @@ The target state order is [east, v_east, north, v_north, a_east, a_north] (m, m/
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Annotated, Literal, Self
+from collections.abc import Mapping
+from typing import Annotated, Literal, Self, SupportsFloat, SupportsInt
 
+import numpy as np
+from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 SCHEMA_VERSION = 1
@@ -50,8 +52,18 @@ def _check_covariance(p: tuple[tuple[float, ...], ...]) -> None:
                 raise ValueError(f"P is not symmetric: P[{i}][{j}]={p[i][j]} P[{j}][{i}]={p[j][i]}")
 
 
-def _rows(matrix: Sequence[Sequence[float]]) -> tuple[tuple[float, ...], ...]:
-    return tuple(tuple(float(v) for v in row) for row in matrix)
+def _vector(x: ArrayLike) -> tuple[float, ...]:
+    array = np.asarray(x, dtype=float)
+    if array.shape != (STATE_DIM,):
+        raise ValueError(f"x must have shape ({STATE_DIM},), got {array.shape}")
+    return tuple(float(v) for v in array)
+
+
+def _matrix(p: ArrayLike) -> tuple[tuple[float, ...], ...]:
+    array = np.asarray(p, dtype=float)
+    if array.shape != (STATE_DIM, STATE_DIM):
+        raise ValueError(f"P must have shape ({STATE_DIM}, {STATE_DIM}), got {array.shape}")
+    return tuple(tuple(float(v) for v in row) for row in array)
 
 
 class TargetObservation(Message):
@@ -85,13 +97,11 @@ class LocalEstimate(Message):
         sender: str,
         t_s: float,
         vehicle: int,
-        x: Sequence[float],
-        P: Sequence[Sequence[float]],
+        x: ArrayLike,
+        P: ArrayLike,
     ) -> LocalEstimate:
-        """Build from numpy arrays or nested sequences (shape (6,) and (6, 6))."""
-        return cls(
-            sender=sender, t_s=t_s, vehicle=vehicle, x=tuple(float(v) for v in x), P=_rows(P)
-        )
+        """Build from numpy arrays or nested sequences of shape (6,) and (6, 6)."""
+        return cls(sender=sender, t_s=t_s, vehicle=vehicle, x=_vector(x), P=_matrix(P))
 
 
 class GlobalEstimate(Message):
@@ -116,15 +126,16 @@ class GlobalEstimate(Message):
         *,
         sender: str,
         t_s: float,
-        x: Sequence[float],
-        P: Sequence[Sequence[float]],
-        beta: dict[int, float],
+        x: ArrayLike,
+        P: ArrayLike,
+        beta: Mapping[SupportsInt, SupportsFloat],
     ) -> GlobalEstimate:
+        """Build from numpy arrays of shape (6,) and (6, 6) and a vehicle -> beta mapping."""
         return cls(
             sender=sender,
             t_s=t_s,
-            x=tuple(float(v) for v in x),
-            P=_rows(P),
+            x=_vector(x),
+            P=_matrix(P),
             beta={int(k): float(b) for k, b in beta.items()},
         )
 

@@ -112,6 +112,15 @@ class Backoff:
             delay = min(delay * self.factor, self.max_s)
 
 
+# CONNACK reasons that retrying cannot fix: MQTT 3.1.1 return codes and MQTT 5 reason codes
+_REFUSALS = {1, 2, 4, 5, 0x84, 0x85, 0x86, 0x87, 0x8C}
+
+
+def _is_refusal(exc: BaseException) -> bool:
+    rc = getattr(exc, "rc", None)
+    return isinstance(exc, aiomqtt.MqttCodeError) and getattr(rc, "value", rc) in _REFUSALS
+
+
 class MqttBus(Bus):
     """A client of an MQTT broker; open with ``async with``.
 
@@ -188,7 +197,8 @@ class MqttBus(Bus):
         self._runner = self._task_group.create_task(self._run(), name=f"mqtt-bus-{self.client_id}")
         try:
             async with asyncio.timeout(self.connect_timeout_s):
-                await self._connected.wait()
+                while self._client is None and not self._runner.done():
+                    await self._changed.wait()
         except TimeoutError as exc:
             await self._shutdown()
             raise BusError(
@@ -198,6 +208,11 @@ class MqttBus(Bus):
         except BaseException:
             await self._shutdown()
             raise
+        if self._client is None:  # the runner gave up: the broker refused us for good
+            await self._shutdown()
+            raise BusError(
+                f"the broker at {self.url} refused the connection: {self._last_error}"
+            ) from self._last_error
 
     async def _stop(self, *, crashed: bool) -> None:
         if crashed and self.will is not None and self._client is not None:
@@ -267,6 +282,12 @@ class MqttBus(Bus):
                         self._receive(message)
             except (aiomqtt.MqttError, BusError) as exc:
                 self._last_error = exc
+                if self.connections == 0 and _is_refusal(exc):
+                    log.error(
+                        "bus %s: %s refused the connection: %s", self.client_id, self.url, exc
+                    )
+                    self._set_client(None)
+                    return  # bad credentials will not get better by retrying
                 log.warning(
                     "bus %s: connection to %s lost or refused: %s", self.client_id, self.url, exc
                 )

@@ -1,0 +1,299 @@
+"""MQTT-only behaviour on a real mosquitto: restarts, last will, URLs, auth, TLS, back-off."""
+
+from __future__ import annotations
+
+import asyncio
+import ssl
+import subprocess
+import sys
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from app.adapters.bus import (
+    Backoff,
+    BrokerUrl,
+    BusUrlError,
+    LinkState,
+    MqttBus,
+    Will,
+    open_bus,
+    topics,
+)
+from app.errors import BusError, ConfigError
+from tests.mosquitto import Mosquitto, free_port, mosquitto_fixture  # noqa: F401
+from tests.test_bus_conformance import WAIT_S, observation, take
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+async def test_broker_restart_is_survived_by_subscriber_and_publisher(
+    mosquitto: Mosquitto,
+) -> None:
+    fast = Backoff(initial_s=0.05, max_s=0.5)
+    async with (
+        MqttBus(mosquitto.url, client_id="sub", backoff=fast) as sub_bus,
+        MqttBus(mosquitto.url, client_id="pub", backoff=fast) as pub,
+        sub_bus.subscribe(topics.ALL_OBSERVATIONS) as sub,
+    ):
+        await pub.publish(topics.observation(0), observation(1.0))
+        assert [m.t_s for _, m in await take(sub, 1)] == [1.0]
+
+        mosquitto.restart()
+        async with asyncio.timeout(WAIT_S):
+            await sub_bus.wait_for_connection(2)  # reconnected and re-subscribed
+        # the publisher has not necessarily reconnected yet: publish waits for it
+        await pub.publish(topics.observation(0), observation(2.0))
+        assert [m.t_s for _, m in await take(sub, 1)] == [2.0]
+        assert pub.connections == 2
+        assert sub_bus.connected
+        assert sub_bus.stats.malformed == 0
+
+
+async def test_publish_fails_with_bus_error_when_the_broker_stays_away(
+    mosquitto: Mosquitto,
+) -> None:
+    async with MqttBus(mosquitto.url, op_timeout_s=0.5, backoff=Backoff(0.05, 2, 0.1)) as bus:
+        mosquitto.stop()
+        error: BusError | None = None
+        # the first publishes may still see the dying connection; a later one must fail
+        for i in range(50):
+            try:
+                await bus.publish(topics.observation(0), observation(float(i)))
+            except BusError as exc:
+                error = exc
+                break
+        assert error is not None
+        assert "not connected to the broker" in str(error) or "publish on" in str(error)
+
+
+WILL_CLIENT = textwrap.dedent(
+    """
+    import asyncio, sys
+    from app.adapters.bus import LinkState, MqttBus, Will, topics
+
+    async def main(url):
+        will = Will(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5))
+        async with MqttBus(url, client_id="agent-5", will=will) as bus:
+            await bus.publish(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=True))
+            print("ready", flush=True)
+            await asyncio.Event().wait()
+
+    asyncio.run(main(sys.argv[1]))
+    """
+)
+
+
+async def test_last_will_is_delivered_when_a_client_process_dies(mosquitto: Mosquitto) -> None:
+    async with (
+        MqttBus(mosquitto.url, client_id="ground") as ground,
+        ground.subscribe(topics.ALL_LINKS) as links,
+    ):
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable,
+            "-c",
+            WILL_CLIENT,
+            mosquitto.url,
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+        )
+        try:
+            assert proc.stdout is not None
+            async with asyncio.timeout(20):
+                assert (await proc.stdout.readline()).strip() == b"ready"
+            [(_, hello)] = await take(links, 1)
+            assert isinstance(hello, LinkState)
+            assert hello.online
+            proc.kill()  # SIGKILL: no DISCONNECT packet, the broker must publish the will
+            await proc.wait()
+            [(topic, will)] = await take(links, 1)
+        finally:
+            if proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+    assert topic == topics.link(5)
+    assert will == LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5)
+
+
+@pytest.mark.parametrize(
+    ("url", "expected"),
+    [
+        ("mqtt://localhost", BrokerUrl("localhost", 1883)),
+        ("mqtt://127.0.0.1:1884", BrokerUrl("127.0.0.1", 1884)),
+        ("mqtts://broker.example", BrokerUrl("broker.example", 8883, tls=True)),
+        (
+            "mqtt://ground:s3cret@10.0.0.2:1883",
+            BrokerUrl("10.0.0.2", 1883, False, "ground", "s3cret"),
+        ),
+        ("mqtt://us%40er:p%3Ass%2Fw@host:1", BrokerUrl("host", 1, False, "us@er", "p:ss/w")),
+        ("mqtt://user@host", BrokerUrl("host", 1883, False, "user", None)),
+        ("mqtt://user:@host", BrokerUrl("host", 1883, False, "user", "")),
+        ("mqtt://[::1]:1883/", BrokerUrl("::1", 1883)),
+    ],
+)
+def test_broker_urls_are_parsed(url: str, expected: BrokerUrl) -> None:
+    assert BrokerUrl.parse(url) == expected
+
+
+def test_the_password_is_never_shown() -> None:
+    url = BrokerUrl.parse("mqtt://ground:s3cret@host:1883")
+    assert "s3cret" not in str(url)
+    assert "s3cret" not in repr(url)
+    with pytest.raises(BusUrlError) as info:
+        BrokerUrl.parse("http://ground:s3cret@host:1883")
+    assert "s3cret" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("url", "reason"),
+    [
+        ("http://host:1883", "scheme must be mqtt:// or mqtts://"),
+        ("host:1883", "scheme must be"),
+        ("mqtt://", "no host"),
+        ("mqtt://:1883", "no host"),
+        ("mqtt://host:99999", "out of range"),
+        ("mqtt://host:abc", "bad broker URL"),
+        ("mqtt://host:0", "port 0"),
+        ("mqtt://host:1883/topic", "only mqtt"),
+        ("mqtt://host:1883?qos=1", "only mqtt"),
+        ("mqtt://:pw@host", "password without a user"),
+    ],
+)
+def test_bad_urls_are_refused_with_the_reason(url: str, reason: str) -> None:
+    with pytest.raises(BusUrlError, match=reason) as info:
+        open_bus(url)
+    assert isinstance(info.value, ConfigError)
+    assert isinstance(info.value, BusError)
+
+
+async def test_an_unreachable_broker_is_a_bus_error_naming_it() -> None:
+    port = free_port()  # nothing listens there
+    bus = open_bus(f"mqtt://127.0.0.1:{port}", connect_timeout_s=0.5)
+    with pytest.raises(BusError, match=f"cannot connect to the broker at mqtt://127.0.0.1:{port}"):
+        async with bus:
+            pass
+    assert not bus.is_open
+
+
+async def test_reconnect_back_off_grows_to_its_cap_on_the_injected_clock() -> None:
+    waits: list[float] = []
+
+    async def fake_sleep(seconds: float) -> None:
+        waits.append(seconds)
+        await asyncio.sleep(0)
+
+    bus = MqttBus(
+        f"mqtt://127.0.0.1:{free_port()}",
+        backoff=Backoff(initial_s=1.0, factor=2.0, max_s=8.0),
+        connect_timeout_s=0.3,
+        sleep=fake_sleep,
+    )
+    with pytest.raises(BusError):
+        async with bus:
+            pass
+    assert len(waits) >= 6
+    assert waits[:6] == [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]
+
+
+def test_backoff_rejects_nonsense() -> None:
+    with pytest.raises(ValueError, match="initial_s"):
+        Backoff(initial_s=0.0)
+    with pytest.raises(ValueError, match="initial_s"):
+        Backoff(initial_s=2.0, max_s=1.0)
+
+
+@pytest.fixture
+def password_broker(tmp_path: Path) -> Iterator[Mosquitto]:
+    """A broker that only lets in ``ground`` with password ``s3cret``."""
+    passwords = tmp_path / "passwd"
+    passwords.write_text("", encoding="utf-8")
+    subprocess.run(
+        ["mosquitto_passwd", "-b", str(passwords), "ground", "s3cret"], check=True, timeout=10
+    )
+    broker = Mosquitto(tmp_path, anonymous=False, extra_config=f"password_file {passwords}\n")
+    broker.start()
+    yield broker
+    broker.stop()
+
+
+async def test_user_and_password_from_the_url_are_used(password_broker: Mosquitto) -> None:
+    port = password_broker.port
+    async with (
+        open_bus(f"mqtt://ground:s3cret@127.0.0.1:{port}") as bus,
+        bus.subscribe(topics.ALL_OBSERVATIONS) as sub,
+    ):
+        await bus.publish(topics.observation(0), observation(1.0))
+        assert [m.t_s for _, m in await take(sub, 1)] == [1.0]
+    for bad in ("ground:wrong@", "", "nobody:x@"):
+        bus = open_bus(f"mqtt://{bad}127.0.0.1:{port}", connect_timeout_s=WAIT_S)
+        # refused at once with the broker's reason, not retried until the timeout
+        async with asyncio.timeout(WAIT_S / 2):
+            with pytest.raises(BusError, match=r"refused the connection: .*(user name|authori)"):
+                await bus.__aenter__()
+        assert not bus.is_open
+
+
+@pytest.fixture
+def tls_broker(tmp_path: Path) -> Iterator[tuple[Mosquitto, Path]]:
+    """A broker on TLS only, with a fresh self-signed certificate for 127.0.0.1."""
+    cert, key = tmp_path / "broker.crt", tmp_path / "broker.key"
+    subprocess.run(
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "1",
+            "-subj",
+            "/CN=127.0.0.1",
+            "-addext",
+            "subjectAltName=IP:127.0.0.1",
+            "-keyout",
+            str(key),
+            "-out",
+            str(cert),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=30,
+    )
+    broker = Mosquitto(tmp_path, tls=True, extra_config=f"certfile {cert}\nkeyfile {key}\n")
+    broker.start()
+    yield broker, cert
+    broker.stop()
+
+
+async def test_mqtts_connects_over_tls_and_checks_the_certificate(
+    tls_broker: tuple[Mosquitto, Path],
+) -> None:
+    broker, cert = tls_broker
+    trusting = ssl.create_default_context(cafile=str(cert))
+    async with (
+        open_bus(broker.url, tls_context=trusting) as bus,
+        bus.subscribe(topics.ALL_OBSERVATIONS) as sub,
+    ):
+        await bus.publish(topics.observation(0), observation(1.0))
+        assert [m.t_s for _, m in await take(sub, 1)] == [1.0]
+    # the system's CAs do not know this self-signed broker: refused
+    with pytest.raises(BusError, match="cannot connect"):
+        async with open_bus(broker.url, connect_timeout_s=1.0):
+            pass
+    # and plain MQTT on the TLS port does not get through either
+    with pytest.raises(BusError, match="cannot connect"):
+        async with open_bus(f"mqtt://127.0.0.1:{broker.port}", connect_timeout_s=1.0):
+            pass
+
+
+def test_a_tls_context_needs_mqtts() -> None:
+    with pytest.raises(BusUrlError, match="mqtts"):
+        MqttBus("mqtt://host", tls_context=ssl.create_default_context())
+
+
+def test_will_values_are_checked() -> None:
+    with pytest.raises(ValueError, match="qos"):
+        Will(topics.link(0), LinkState(sender="a", t_s=0.0, online=False), qos=3)
