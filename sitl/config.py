@@ -1,0 +1,219 @@
+"""Plain, validated settings of the built-in simulator: vehicles, camera, wind, ports, time."""
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+from sitl.fixedwing import FixedWingLimits, FixedWingState
+from sitl.target import Maneuver, TargetPath
+
+
+def _finite(name: str, value: float) -> None:
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+
+
+def _positive(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+
+
+def _non_negative(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+
+
+def _probability(name: str, value: float) -> None:
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class CameraConfig:
+    """The simulated tracking camera: geolocation noise, dropouts and outliers.
+
+    The target's reported position is its true position plus Gaussian noise of variance
+    ``sigma2_m2 + (range_sigma_per_m * range_m)**2`` per horizontal axis. Each sample is
+    dropped (not sent) with probability ``dropout_probability``; a sent sample is an outlier
+    with probability ``outlier_probability``, with ``outlier_sigma_m`` of extra noise.
+    Beyond ``max_range_m`` (if set) the camera sees nothing.
+    """
+
+    enabled: bool = True
+    rate_hz: float = 10.0
+    sigma2_m2: float = 10.0
+    range_sigma_per_m: float = 0.0
+    dropout_probability: float = 0.0
+    outlier_probability: float = 0.0
+    outlier_sigma_m: float = 50.0
+    max_range_m: float | None = None
+
+    def __post_init__(self) -> None:
+        _positive("camera rate_hz", self.rate_hz)
+        _non_negative("camera sigma2_m2", self.sigma2_m2)
+        _non_negative("camera range_sigma_per_m", self.range_sigma_per_m)
+        _probability("camera dropout_probability", self.dropout_probability)
+        _probability("camera outlier_probability", self.outlier_probability)
+        _non_negative("camera outlier_sigma_m", self.outlier_sigma_m)
+        if self.max_range_m is not None:
+            _positive("camera max_range_m", self.max_range_m)
+
+    def sigma_m(self, range_m: float) -> float:
+        """Standard deviation of the geolocation error per axis at a slant range."""
+        return math.sqrt(self.sigma2_m2 + (self.range_sigma_per_m * range_m) ** 2)
+
+
+@dataclass(frozen=True, slots=True)
+class WindConfig:
+    """Steady wind plus gusts: a first-order Gauss-Markov process per axis (sigma, tau)."""
+
+    east_m_s: float = 0.0
+    north_m_s: float = 0.0
+    gust_sigma_m_s: float = 0.0
+    gust_tau_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        _finite("wind east_m_s", self.east_m_s)
+        _finite("wind north_m_s", self.north_m_s)
+        _non_negative("wind gust_sigma_m_s", self.gust_sigma_m_s)
+        _positive("wind gust_tau_s", self.gust_tau_s)
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleConfig:
+    """One simulated aircraft: its envelope, where it is launched, how it holds and loiters.
+
+    ``cruise_speed_m_s`` is flown in hold, return and toward a position setpoint. The loiter
+    radius defaults to 1.5 times the tightest turn at cruise speed; a radius tighter than that
+    turn (times 1.05) is refused: the airframe could not fly it.
+    """
+
+    limits: FixedWingLimits
+    start: FixedWingState
+    cruise_speed_m_s: float
+    altitude_m: float = 100.0
+    loiter_radius_m: float | None = None
+    loiter_clockwise: bool = True
+
+    def __post_init__(self) -> None:
+        _positive("cruise_speed_m_s", self.cruise_speed_m_s)
+        _finite("altitude_m", self.altitude_m)
+        lim = self.limits
+        if not lim.min_speed_m_s <= self.cruise_speed_m_s <= lim.max_speed_m_s:
+            raise ValueError(
+                f"cruise_speed_m_s {self.cruise_speed_m_s} is outside "
+                f"[{lim.min_speed_m_s}, {lim.max_speed_m_s}]"
+            )
+        if self.loiter_radius_m is not None:
+            _positive("loiter_radius_m", self.loiter_radius_m)
+            if self.loiter_radius_m < 1.05 * self.min_turn_radius_m:
+                raise ValueError(
+                    f"loiter_radius_m {self.loiter_radius_m} is tighter than the vehicle can "
+                    f"turn at cruise speed (needs >= {1.05 * self.min_turn_radius_m:.1f} m)"
+                )
+
+    @property
+    def min_turn_radius_m(self) -> float:
+        return self.cruise_speed_m_s / self.limits.max_course_rate_rad_s
+
+    @property
+    def effective_loiter_radius_m(self) -> float:
+        if self.loiter_radius_m is not None:
+            return self.loiter_radius_m
+        return 1.5 * self.min_turn_radius_m
+
+
+def default_limits() -> FixedWingLimits:
+    """The paper's vehicle: 18 m/s cruise within [12, 24] m/s, 0.2 rad/s course rate."""
+    return FixedWingLimits(
+        min_speed_m_s=12.0, max_speed_m_s=24.0, max_accel_m_s2=2.0, max_course_rate_rad_s=0.2
+    )
+
+
+def default_vehicles(count: int, spacing_m: float = 100.0) -> tuple[VehicleConfig, ...]:
+    """``count`` paper vehicles launched in a row west to east, 600 m south, flying north."""
+    if count < 1:
+        raise ValueError(f"need at least one vehicle, got {count}")
+    limits = default_limits()
+    half = 0.5 * (count - 1) * spacing_m
+    return tuple(
+        VehicleConfig(
+            limits=limits,
+            start=FixedWingState(
+                east_m=i * spacing_m - half, north_m=-600.0, course_rad=0.0, speed_m_s=18.0
+            ),
+            cruise_speed_m_s=18.0,
+        )
+        for i in range(count)
+    )
+
+
+def stationary_target(east_m: float = 0.0, north_m: float = 0.0) -> TargetPath:
+    """A target standing at a point."""
+    return TargetPath.from_maneuvers(east_m, north_m, 0.0, 0.0, [Maneuver(1.0)])
+
+
+FailsafeAction = Literal["hold", "return"]
+
+
+@dataclass(frozen=True, slots=True)
+class SimConfig:
+    """Everything the simulator server needs.
+
+    Time: simulated time runs ``speedup`` times faster than wall time and advances in fixed
+    physics steps of ``physics_dt_s``; every MAVLink time field is simulated time. Telemetry and
+    camera rates are per simulated second.
+
+    Ports: vehicle i (system id i+1) sends to ``gcs_host``:``base_port + i`` and answers whoever
+    sends to it. It binds ``bind_host``:``bind_base_port + i``, or an ephemeral port when
+    ``bind_base_port`` is None.
+
+    Failsafe: in offboard, when no setpoint has come for ``offboard_timeout_s`` of simulated
+    time (and at least ``offboard_timeout_min_wall_s`` of wall time, since clients resend
+    setpoints at a wall-clock rate), the vehicle does ``failsafe_action``.
+    """
+
+    vehicles: tuple[VehicleConfig, ...]
+    target: TargetPath = field(default_factory=stationary_target)
+    origin_lat_deg: float = 47.397742
+    origin_lon_deg: float = 8.545594
+    origin_alt_m: float = 488.0
+    gcs_host: str = "127.0.0.1"
+    base_port: int = 14540
+    bind_host: str = "127.0.0.1"
+    bind_base_port: int | None = None
+    speedup: float = 1.0
+    seed: int = 0
+    physics_dt_s: float = 0.02
+    telemetry_rate_hz: float = 10.0
+    offboard_timeout_s: float = 1.0
+    offboard_timeout_min_wall_s: float = 0.25
+    failsafe_action: FailsafeAction = "hold"
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    wind: WindConfig = field(default_factory=WindConfig)
+
+    def __post_init__(self) -> None:
+        if not self.vehicles:
+            raise ValueError("need at least one vehicle")
+        if len(self.vehicles) > 254:
+            raise ValueError(f"at most 254 vehicles (system ids 1..254), got {len(self.vehicles)}")
+        if not (-90.0 <= self.origin_lat_deg <= 90.0):
+            raise ValueError(f"origin_lat_deg must be in [-90, 90], got {self.origin_lat_deg!r}")
+        if not (-180.0 <= self.origin_lon_deg <= 180.0):
+            raise ValueError(f"origin_lon_deg must be in [-180, 180], got {self.origin_lon_deg!r}")
+        _finite("origin_alt_m", self.origin_alt_m)
+        for name, port, count in (
+            ("base_port", self.base_port, len(self.vehicles)),
+            ("bind_base_port", self.bind_base_port, len(self.vehicles)),
+        ):
+            if port is not None and not (port >= 1 and port + count - 1 <= 65535):
+                raise ValueError(f"{name} {port} + {count} vehicles runs outside 1..65535")
+        _positive("speedup", self.speedup)
+        _positive("physics_dt_s", self.physics_dt_s)
+        _positive("telemetry_rate_hz", self.telemetry_rate_hz)
+        _positive("offboard_timeout_s", self.offboard_timeout_s)
+        _non_negative("offboard_timeout_min_wall_s", self.offboard_timeout_min_wall_s)
+        if self.failsafe_action not in ("hold", "return"):
+            raise ValueError(
+                f"failsafe_action must be 'hold' or 'return', got {self.failsafe_action!r}"
+            )
