@@ -289,24 +289,25 @@ async def test_closed_subscription_ends_and_gets_nothing_more(harness: Harness) 
 async def test_closing_the_bus_ends_every_subscription_and_refuses_publishing(
     harness: Harness,
 ) -> None:
-    bus = harness.open()
-    async with bus:
+    async with harness.open() as bus:
         sub = bus.subscribe(topics.ALL)
         await sub.__aenter__()
+        reader_waiting = asyncio.Event()
 
         async def drain() -> list[Any]:
+            reader_waiting.set()
             return [item async for item in sub]
 
         async with asyncio.TaskGroup() as tg:
             reader = tg.create_task(drain())
-            await asyncio.sleep(0)  # let the reader block on the empty queue
-            await bus.__aexit__(None, None, None)
+            await reader_waiting.wait()
+            await bus.aclose()
         assert reader.result() == []
+        assert not bus.is_open
         with pytest.raises(BusClosed):
             await bus.publish(topics.MISSION, EXAMPLES[3][1])
         with pytest.raises(BusClosed):
             await bus.subscribe(topics.ALL).__aenter__()
-        await bus.__aenter__()  # reopen so that the outer "async with" has something to close
 
 
 async def test_garbage_is_dropped_counted_and_the_loop_goes_on(harness: Harness) -> None:

@@ -176,6 +176,8 @@ class Bus(abc.ABC):
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        if not self._open:
+            return
         self._open = False
         for subs in self._subscriptions.values():
             for sub in subs:
@@ -183,10 +185,17 @@ class Bus(abc.ABC):
         self._subscriptions.clear()
         await self._stop(crashed=exc is not None and not isinstance(exc, asyncio.CancelledError))
 
+    async def aclose(self) -> None:
+        """Close the bus (as leaving ``async with`` cleanly does); closing twice is harmless."""
+        await self.__aexit__(None, None, None)
+
     async def publish(
         self, topic: Topic | str, message: Message, *, qos: int | None = None
     ) -> None:
-        """Send ``message`` on ``topic`` (a name, no wildcards). Raises BusError on failure."""
+        """Send ``message`` on ``topic`` (a name, no wildcards). Raises BusError on failure.
+
+        A publish is a suspension point on both buses (it yields to the event loop).
+        """
         if not isinstance(message, Message):
             raise TypeError(f"publish takes a bus Message, got {type(message).__name__}")
         topic = as_topic(topic)

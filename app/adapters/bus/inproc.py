@@ -7,6 +7,7 @@ last will published for a client whose context exits on an error.
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import logging
 
@@ -63,6 +64,7 @@ class InProcessBus(Bus):
 
     async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
         self.broker.route(topic.value, payload)
+        await asyncio.sleep(0)  # yield like a network publish, so a publishing loop cannot starve
 
     async def _add_filter(self, topic_filter: TopicFilter) -> None:
         return None
