@@ -16,6 +16,7 @@ import contextlib
 import functools
 import logging
 import math
+import socket
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
@@ -42,6 +43,7 @@ PEER_EXPIRY_WALL_S = 10.0
 MAX_CATCH_UP_WALL_S = 0.25
 MIN_SLEEP_WALL_S = 0.001
 OBSERVATION_LOG_LENGTH = 10_000
+RECEIVE_BUFFER_BYTES = 1 << 20
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,6 +105,15 @@ class _Link:
     learned: dict[Address, float] = field(default_factory=dict)
     up: bool = True
     stats: LinkStats = field(default_factory=LinkStats)
+
+
+def _enlarge_receive_buffer(transport: asyncio.DatagramTransport) -> None:
+    """Ask for a 1 MiB receive buffer (best effort, capped by the OS) to ride out bursts."""
+    sock = transport.get_extra_info("socket")
+    if sock is None:
+        return
+    with contextlib.suppress(OSError):
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
 
 
 class _Protocol(asyncio.DatagramProtocol):
@@ -188,6 +199,7 @@ class SimulatorServer:
                     local_addr=local,
                 )
                 stack.callback(transport.close)
+                _enlarge_receive_buffer(transport)
                 link.transport = transport
                 host, bound_port = transport.get_extra_info("sockname")[:2]
                 link.local = (host, bound_port)

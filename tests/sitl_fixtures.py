@@ -100,18 +100,31 @@ class RawClient:
         return await self.wait_for(lambda m: m.get_type() == "HEARTBEAT", timeout_s, start=0)
 
     async def command(
-        self, command: int, *params: float, target_system: int, timeout_s: float = 3.0
+        self,
+        command: int,
+        *params: float,
+        target_system: int,
+        timeout_s: float = 1.0,
+        tries: int = 3,
     ) -> int:
-        """Send COMMAND_LONG and return the COMMAND_ACK result."""
+        """Send COMMAND_LONG and return the COMMAND_ACK result, resending (with the
+        confirmation count raised) after ``timeout_s`` without an ack, as MAVSDK does."""
         full = [*params, *([math.nan] * (7 - len(params)))]
-        start = len(self.inbox.messages)
-        self.send(mavlink.MAVLink_command_long_message(target_system, 1, command, 0, *full))
-        ack = await self.wait_for(
-            lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
-            timeout_s,
-            start=start,
-        )
-        return int(ack.result)
+        for confirmation in range(tries):
+            start = len(self.inbox.messages)
+            self.send(
+                mavlink.MAVLink_command_long_message(target_system, 1, command, confirmation, *full)
+            )
+            try:
+                ack = await self.wait_for(
+                    lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
+                    timeout_s,
+                    start=start,
+                )
+            except TimeoutError:
+                continue
+            return int(ack.result)
+        raise TimeoutError(f"no COMMAND_ACK for command {command} after {tries} tries")
 
     def velocity_setpoint(
         self, target_system: int, north_m_s: float, east_m_s: float, time_boot_ms: int = 0
