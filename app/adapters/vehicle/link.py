@@ -244,13 +244,13 @@ class VehicleLink(Protocol):
         ...
 
     def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
-        """Every telemetry frame from now on; ends when the link closes."""
+        """Every telemetry frame from this call on; ends when the link closes."""
         ...
 
     def observations(self) -> AsyncIterator[TargetObservation]:
-        """Every target observation from the vehicle's camera from now on."""
+        """Every target observation from the vehicle's camera from this call on."""
         ...
 
     def events(self) -> AsyncIterator[LinkEvent]:
-        """Every link event from now on."""
+        """Every link event from this call on (subscribe before the action that causes it)."""
         ...

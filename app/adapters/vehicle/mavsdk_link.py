@@ -11,6 +11,7 @@ MAVSDK exception is translated into ``LinkError`` here, with ``from exc``.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import math
@@ -132,10 +133,39 @@ def route_mavsdk_logs() -> None:
         _log_routed = True
 
 
-class _Broadcast(Generic[T]):
-    """Fan-out of one stream to many async-iterating subscribers, newest kept when one lags."""
+_END: Final = object()
 
-    _END: Final = object()
+
+class Subscription(Generic[T]):
+    """One subscriber's view of a broadcast: registered when created (nothing published after
+    the call is missed), read with ``async for``, released by ``aclose()`` or at the end."""
+
+    def __init__(self, queues: set[asyncio.Queue[object]], queue_size: int, closed: bool) -> None:
+        self._queues = queues
+        self._queue: asyncio.Queue[object] = asyncio.Queue(queue_size)
+        self._done = closed
+        if not closed:
+            queues.add(self._queue)
+
+    def __aiter__(self) -> Subscription[T]:
+        return self
+
+    async def __anext__(self) -> T:
+        if self._done:
+            raise StopAsyncIteration
+        item = await self._queue.get()
+        if item is _END:
+            await self.aclose()
+            raise StopAsyncIteration
+        return item  # type: ignore[return-value]
+
+    async def aclose(self) -> None:
+        self._done = True
+        self._queues.discard(self._queue)
+
+
+class _Broadcast(Generic[T]):
+    """Fan-out of one stream to many subscribers; a lagging one loses its oldest items."""
 
     def __init__(self, name: str, queue_size: int) -> None:
         self._name = name
@@ -158,21 +188,10 @@ class _Broadcast(Generic[T]):
         for queue in self._queues:
             if queue.full():
                 queue.get_nowait()
-            queue.put_nowait(self._END)
+            queue.put_nowait(_END)
 
-    async def subscribe(self) -> AsyncIterator[T]:
-        if self._closed:
-            return
-        queue: asyncio.Queue[object] = asyncio.Queue(self._queue_size)
-        self._queues.add(queue)
-        try:
-            while True:
-                item = await queue.get()
-                if item is self._END:
-                    return
-                yield item  # type: ignore[misc]
-        finally:
-            self._queues.discard(queue)
+    def subscribe(self) -> Subscription[T]:
+        return Subscription(self._queues, self._queue_size, self._closed)
 
 
 @dataclass(frozen=True, slots=True)
@@ -400,13 +419,13 @@ class MavsdkVehicleLink:
 
     # -- streams ---------------------------------------------------------------------------
 
-    def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
+    def telemetry(self) -> Subscription[VehicleTelemetry]:
         return self._telemetry.subscribe()
 
-    def observations(self) -> AsyncIterator[TargetObservation]:
+    def observations(self) -> Subscription[TargetObservation]:
         return self._observations.subscribe()
 
-    def events(self) -> AsyncIterator[LinkEvent]:
+    def events(self) -> Subscription[LinkEvent]:
         return self._events.subscribe()
 
     async def _notify(self) -> None:
@@ -640,6 +659,14 @@ class MavsdkVehicleLink:
         )
 
     async def take_off(self, timeout_s: float) -> None:
+        # decide on a frame newer than the call: arming may just have launched the vehicle
+        before = self._latest
+        with contextlib.suppress(LinkError):
+            await self._wait_for(
+                lambda: self._latest is not before and self._latest is not None,
+                min(timeout_s, self._config.link_timeout_s),
+                "no fresh telemetry",
+            )
         if self._airborne():
             return
         try:
@@ -759,6 +786,7 @@ class MavsdkHub:
         self._clock = clock
         self._route_logs = route_logs
         self._mavsdk: Mavsdk | None = None
+        self._open_ids: set[int] = set()
 
     async def __aenter__(self) -> MavsdkHub:
         if self._route_logs:
@@ -815,10 +843,22 @@ class MavsdkHub:
     async def link(
         self, system_id: int, config: LinkConfig, *, timeout_s: float = 10.0
     ) -> AsyncIterator[MavsdkVehicleLink]:
-        """A link to one vehicle, open for the ``async with`` block (holds the vehicle on exit)."""
+        """A link to one vehicle, open for the ``async with`` block (holds the vehicle on exit).
+
+        One link per system id at a time: MAVSDK 4.1 resets a plugin's cached values when
+        another instance of that plugin on the same system goes away.
+        """
+        if system_id in self._open_ids:
+            raise LinkError(f"vehicle {system_id} already has an open link on this hub")
         system = await self.system(system_id, timeout_s)
-        async with MavsdkVehicleLink(system, system_id, self._origin, config, self._clock) as link:
-            yield link
+        self._open_ids.add(system_id)
+        try:
+            async with MavsdkVehicleLink(
+                system, system_id, self._origin, config, self._clock
+            ) as link:
+                yield link
+        finally:
+            self._open_ids.discard(system_id)
 
 
 @asynccontextmanager
@@ -845,6 +885,7 @@ __all__ = [
     "LinkCounters",
     "MavsdkHub",
     "MavsdkVehicleLink",
+    "Subscription",
     "open_vehicle_links",
     "route_mavsdk_logs",
     "validate_url",
