@@ -101,6 +101,8 @@ def validate_url(url: str) -> str:
         raise ConfigError(f"vehicle URL {url!r}: bad port") from exc
     if port is None or parts.hostname is None:
         raise ConfigError(f"vehicle URL {url!r}: expected {parts.scheme}://<host>:<port>")
+    if not 1 <= port <= 65535:
+        raise ConfigError(f"vehicle URL {url!r}: port must be in 1..65535 (MAVSDK refuses 0)")
     return url
 
 

@@ -1,0 +1,265 @@
+"""Vehicle link pieces that need no vehicle: URLs, the mission frame, subscriptions, frame and
+observation decoding, the link-loss watchdog, and hub errors against real MAVSDK."""
+
+import asyncio
+import math
+from contextlib import aclosing
+from typing import Any
+
+import pytest
+from mavsdk.asyncio import MavsdkConnectionError
+
+from app.adapters.vehicle.autopilots import SetpointLimits
+from app.adapters.vehicle.link import GeodeticOrigin, LinkLost, VehicleClockReset
+from app.adapters.vehicle.mavsdk_link import (
+    LinkConfig,
+    MavsdkHub,
+    MavsdkVehicleLink,
+    _Broadcast,
+    validate_url,
+)
+from app.errors import ConfigError, LinkError
+from sitl.ports import find_free_udp_base_port
+
+ORIGIN = GeodeticOrigin(47.397742, 8.545594, 488.0)
+CONFIG = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), autopilot="velocity")
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "udpin://0.0.0.0:14540",
+        "udpout://192.168.1.10:14550",
+        "tcp://127.0.0.1:5760",
+        "tcpout://127.0.0.1:5760",
+        "serial:///dev/ttyUSB0:57600",
+    ],
+)
+def test_supported_urls_pass(url):
+    assert validate_url(url) == url
+
+
+@pytest.mark.parametrize(
+    ("url", "why"),
+    [
+        ("udp://:14540", "scheme must be one of"),
+        ("http://host:80", "scheme must be one of"),
+        ("udpin://0.0.0.0", "expected udpin://<host>:<port>"),
+        ("udpin://0.0.0.0:99999", "bad port"),
+        ("udpin://0.0.0.0:0", "port must be in 1..65535"),
+        ("serial:///dev/ttyUSB0", "expected serial:///dev/<device>:<baud>"),
+    ],
+)
+def test_bad_urls_are_config_errors_naming_the_url(url, why):
+    with pytest.raises(ConfigError, match=why) as info:
+        validate_url(url)
+    assert url in str(info.value)
+
+
+def test_a_hub_needs_a_url():
+    with pytest.raises(ConfigError, match="at least one"):
+        MavsdkHub([], ORIGIN)
+
+
+async def test_a_connection_mavsdk_cannot_open_is_a_link_error():
+    hub = MavsdkHub(["serial:///dev/standoff-no-such-port:57600"], ORIGIN)
+    with pytest.raises(LinkError, match="cannot open vehicle connection") as info:
+        async with hub:
+            pass
+    assert isinstance(info.value.__cause__, MavsdkConnectionError)
+
+
+async def test_a_vehicle_that_never_appears_times_out_as_a_link_error():
+    port = find_free_udp_base_port(1)
+    async with MavsdkHub([f"udpin://127.0.0.1:{port}"], ORIGIN) as hub:
+        with pytest.raises(LinkError, match="no autopilot with system id 2"):
+            await hub.system(2, timeout_s=0.3)
+
+
+def test_origin_round_trip_and_scale():
+    east, north, up = ORIGIN.to_enu(*ORIGIN.to_geodetic(120.0, -350.0, 40.0))
+    assert east == pytest.approx(120.0, abs=1e-6)
+    assert north == pytest.approx(-350.0, abs=1e-6)
+    assert up == pytest.approx(40.0, abs=1e-6)
+    # a thousandth of a degree of latitude is about 111 m north
+    _, north, _ = ORIGIN.to_enu(ORIGIN.latitude_deg + 1e-3, ORIGIN.longitude_deg, 488.0)
+    assert north == pytest.approx(111.2, abs=0.2)
+
+
+@pytest.mark.parametrize(("lat", "lon"), [(91.0, 0.0), (0.0, -181.0), (math.nan, 0.0)])
+def test_origin_rejects_impossible_coordinates(lat, lon):
+    with pytest.raises(ValueError, match=r"latitude_deg|longitude_deg"):
+        GeodeticOrigin(lat, lon)
+
+
+# ---- subscriptions -----------------------------------------------------------------------------
+
+
+async def test_a_subscription_sees_what_is_published_after_the_call_until_close():
+    broadcast: _Broadcast[int] = _Broadcast("test", 8)
+    broadcast.publish(0)  # before anyone listens: nobody gets it
+    subscription = broadcast.subscribe()
+    broadcast.publish(1)  # before the first read: kept
+    broadcast.publish(2)
+    broadcast.close()
+    assert [item async for item in subscription] == [1, 2]
+
+
+async def test_a_lagging_subscriber_loses_the_oldest_items_counted():
+    broadcast: _Broadcast[int] = _Broadcast("test", 3)
+    subscription = broadcast.subscribe()
+    for item in range(5):
+        broadcast.publish(item)
+    broadcast.close()
+    assert [item async for item in subscription] == [3, 4]  # the end marker took a slot
+    assert broadcast.dropped == 2
+
+
+async def test_a_closed_subscription_no_longer_receives():
+    broadcast: _Broadcast[int] = _Broadcast("test", 3)
+    async with aclosing(broadcast.subscribe()) as subscription:
+        broadcast.publish(1)
+        assert await anext(subscription) == 1
+    broadcast.publish(2)  # nobody listening any more, nothing dropped
+    assert broadcast.dropped == 0
+    assert broadcast.subscribe().__class__.__name__ == "Subscription"
+
+
+# ---- decoding ----------------------------------------------------------------------------------
+
+
+def link(clock: Any = None, config: LinkConfig = CONFIG) -> MavsdkVehicleLink:
+    """A link that is never opened: its decoding and watchdog need no vehicle."""
+    if clock is None:
+        return MavsdkVehicleLink(None, 4, ORIGIN, config)
+    return MavsdkVehicleLink(None, 4, ORIGIN, config, clock)
+
+
+def position(t_ms: int, **changes: int) -> dict[str, int]:
+    fields = {
+        "time_boot_ms": t_ms,
+        "lat": round(ORIGIN.latitude_deg * 1e7),
+        "lon": round(ORIGIN.longitude_deg * 1e7),
+        "alt": 588_000,
+        "relative_alt": 100_000,
+        "vx": 0,
+        "vy": 1500,
+        "vz": -100,
+        "hdg": 9000,
+    }
+    fields.update(changes)
+    return fields
+
+
+def test_global_position_becomes_a_frame_in_the_mission_frame():
+    frame = link()._frame(position(12_345))
+    assert frame is not None
+    assert frame.vehicle_id == 4
+    assert frame.t_s == 12.345
+    assert frame.east_m == pytest.approx(0.0, abs=0.01)
+    assert frame.north_m == pytest.approx(0.0, abs=0.01)
+    assert frame.up_m == pytest.approx(100.0, abs=0.01)
+    assert frame.relative_altitude_m == 100.0
+    assert frame.course_rad == pytest.approx(math.pi / 2)  # flying east
+    assert frame.ground_speed_m_s == 15.0
+    assert frame.climb_rate_m_s == 1.0
+
+
+def test_course_of_a_vehicle_at_rest_is_its_heading():
+    frame = link()._frame(position(1000, vy=0, hdg=27000))
+    assert frame is not None
+    assert frame.course_rad == pytest.approx(math.radians(270.0))
+
+
+async def test_out_of_order_frames_are_dropped_and_a_reboot_is_an_event():
+    vehicle = link()
+    events = vehicle.events()
+    first = vehicle._frame(position(20_000))
+    vehicle._latest = first
+    assert vehicle._frame(position(19_900)) is None  # late UDP packet
+    assert vehicle._frame(position(20_000)) is None  # duplicate
+    assert vehicle.counters.stale_frames == 2
+    rebooted = vehicle._frame(position(1_000))
+    assert rebooted is not None
+    assert rebooted.t_s == 1.0
+    vehicle._events.close()
+    assert [event async for event in events] == [VehicleClockReset(4, 1.0, 20.0)]
+
+
+def geo_status(**changes: Any) -> dict[str, Any]:
+    fields: dict[str, Any] = {
+        "tracking_status": 1,
+        "lat": round(ORIGIN.latitude_deg * 1e7) + 900,  # about 10 m north
+        "lon": round(ORIGIN.longitude_deg * 1e7),
+        "alt": 488.0,
+        "h_acc": 3.0,
+        "v_acc": None,  # MAVSDK's JSON for a NaN float
+    }
+    fields.update(changes)
+    return fields
+
+
+def test_tracking_status_becomes_an_observation_at_the_vehicle_time():
+    vehicle = link()
+    assert vehicle._observation(geo_status()) is None  # no telemetry yet: no time to stamp
+    vehicle._latest = vehicle._frame(position(7_500))
+    observation = vehicle._observation(geo_status())
+    assert observation is not None
+    assert observation.t_s == 7.5
+    assert observation.north_m == pytest.approx(10.0, abs=0.05)
+    assert observation.east_m == pytest.approx(0.0, abs=0.01)
+    assert observation.sigma_m == 3.0
+
+
+@pytest.mark.parametrize(
+    ("changes", "sigma"), [({"h_acc": None}, None), ({"h_acc": 0.0}, None), ({}, 3.0)]
+)
+def test_unknown_accuracy_gives_no_sigma(changes, sigma):
+    vehicle = link()
+    vehicle._latest = vehicle._frame(position(1_000))
+    observation = vehicle._observation(geo_status(**changes))
+    assert observation is not None
+    assert observation.sigma_m == sigma
+
+
+@pytest.mark.parametrize("status", [0, 2, 3])
+def test_idle_or_failing_tracker_gives_no_observation(status):
+    vehicle = link()
+    vehicle._latest = vehicle._frame(position(1_000))
+    assert vehicle._observation(geo_status(tracking_status=status)) is None
+
+
+def test_malformed_fields_raise_for_the_reader_to_count():
+    with pytest.raises(KeyError):
+        link()._frame({"time_boot_ms": 1})
+
+
+# ---- watchdog ----------------------------------------------------------------------------------
+
+
+async def test_watchdog_declares_the_link_lost_after_the_timeout_of_silence():
+    now = [100.0]
+    config = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), link_timeout_s=0.04)
+    vehicle = link(lambda: now[0], config)
+    vehicle._latest = vehicle._frame(position(3_000))
+    vehicle._last_rx = 100.0
+    vehicle._link_ok = True
+    async with (
+        aclosing(vehicle.events()) as events,
+        aclosing(vehicle.telemetry()) as frames,
+        asyncio.TaskGroup() as group,
+    ):
+        watchdog = group.create_task(vehicle._watchdog(), name="watchdog")
+        await asyncio.sleep(0.05)  # silent for no time on the injected clock: still up
+        up_before = vehicle.link_ok
+        now[0] = 100.5
+        async with asyncio.timeout(1.0):
+            event = await anext(events)
+            frame = await anext(frames)
+        watchdog.cancel()
+    assert up_before
+    assert event == LinkLost(4, 3.0, 0.5)
+    assert frame.link_ok is False
+    assert frame.t_s == 3.0
+    assert not vehicle.link_ok
+    assert vehicle.counters.link_losses == 1
