@@ -132,7 +132,7 @@ async def test_three_vehicles_connect_arm_and_follow_commanded_courses():
                     state.north_m, abs=0.5
                 )
                 # the commanded 45-90 degree turns went out rate-limited, and were counted
-                assert link.counters.reasons.get("course change", 0) > 0
+                assert link.counters.limited_by.get("course_rate", 0) > 0
                 assert link.counters.setpoints > 50
                 assert link.counters.malformed == 0
         # leaving the links put every vehicle in hold
@@ -376,3 +376,31 @@ async def test_one_link_per_vehicle_and_missing_vehicles_time_out():
         with pytest.raises(LinkError, match="no autopilot with system id 7"):
             async with hub.link(7, VELOCITY, timeout_s=0.5):
                 pass
+
+
+async def test_cancelling_the_mission_puts_the_vehicle_in_hold():
+    config = sim_config(1, speedup=SPEEDUP)
+    east = CourseSpeedCommand(math.pi / 2, 16.0)
+    async with (
+        asyncio.timeout(40.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+    ):
+        flying = asyncio.Event()
+
+        async def mission() -> None:
+            async with hub.link(1, VELOCITY) as link:
+                await launch(link, east)
+                flying.set()
+                await fly(link, east, 1e6)  # until cancelled, as by Ctrl-C
+
+        task = asyncio.create_task(mission(), name="mission")
+        try:
+            await flying.wait()
+            await sim.wait_until(sim.time_s + 2.0)
+            assert sim.truth().vehicles[0].mode == "offboard"
+        finally:
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+        assert sim.truth().vehicles[0].mode == "hold"

@@ -177,26 +177,43 @@ class SentSetpoint:
 
 COURSE_TOLERANCE_RAD: Final = 1e-9
 
+LimitKind = Literal["speed_below_min", "speed_above_max", "course_rate"]
+
+
+@dataclass(frozen=True, slots=True)
+class Limited:
+    """Why a setpoint was changed before it left: ``kind`` for counting, ``detail`` for logs."""
+
+    kind: LimitKind
+    detail: str
+
+    def __str__(self) -> str:
+        return self.detail
+
 
 def limit_setpoint(
     command: CourseSpeedCommand,
     t_s: float,
     previous: SentSetpoint | None,
     limits: SetpointLimits,
-) -> tuple[CourseSpeedCommand, tuple[str, ...]]:
+) -> tuple[CourseSpeedCommand, tuple[Limited, ...]]:
     """The command brought within the limits, and why it had to be (empty when it was not).
 
     Speed is clamped into [min, max]. When a previous setpoint is known, the course moves
     towards the requested one by at most ``max_course_rate_rad_s * (t_s - previous.t_s)``
     (the shorter way round); time running backwards counts as no time.
     """
-    reasons: list[str] = []
+    reasons: list[Limited] = []
     speed = command.speed_m_s
     if speed < limits.min_speed_m_s:
-        reasons.append(f"speed {speed:.3f} m/s below {limits.min_speed_m_s} m/s")
+        reasons.append(
+            Limited("speed_below_min", f"speed {speed:.3f} m/s below {limits.min_speed_m_s} m/s")
+        )
         speed = limits.min_speed_m_s
     elif speed > limits.max_speed_m_s:
-        reasons.append(f"speed {speed:.3f} m/s above {limits.max_speed_m_s} m/s")
+        reasons.append(
+            Limited("speed_above_max", f"speed {speed:.3f} m/s above {limits.max_speed_m_s} m/s")
+        )
         speed = limits.max_speed_m_s
     course = command.course_rad
     if not -math.pi <= course < math.pi:
@@ -207,8 +224,11 @@ def limit_setpoint(
         delta = wrap_pi(course - previous.course_rad)
         if abs(delta) > allowed + COURSE_TOLERANCE_RAD:
             reasons.append(
-                f"course change {delta:+.4f} rad in {dt:.3f} s exceeds "
-                f"{limits.max_course_rate_rad_s} rad/s"
+                Limited(
+                    "course_rate",
+                    f"course change {delta:+.4f} rad in {dt:.3f} s exceeds "
+                    f"{limits.max_course_rate_rad_s} rad/s",
+                )
             )
             course = wrap_pi(previous.course_rad + math.copysign(allowed, delta))
     if not reasons:

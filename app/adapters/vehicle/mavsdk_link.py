@@ -243,7 +243,7 @@ class LinkCounters:
     setpoints_limited: int = 0
     link_losses: int = 0
     left_offboard: int = 0
-    reasons: dict[str, int] = field(default_factory=dict)
+    limited_by: dict[str, int] = field(default_factory=dict)
 
 
 def _fields(message: Any) -> dict[str, Any]:
@@ -721,18 +721,19 @@ class MavsdkVehicleLink:
         if reasons:
             self.counters.setpoints_limited += 1
             for reason in reasons:
-                key = reason.split(" ", 2)[0] + " " + reason.split(" ", 2)[1]
-                self.counters.reasons[key] = self.counters.reasons.get(key, 0) + 1
+                by_kind = self.counters.limited_by
+                by_kind[reason.kind] = by_kind.get(reason.kind, 0) + 1
+            detail = "; ".join(str(reason) for reason in reasons)
             level = logging.DEBUG if self._limited_burst else logging.WARNING
             log.log(
                 level,
                 "vehicle %d: setpoint limited (%d so far): %s",
                 self._id,
                 self.counters.setpoints_limited,
-                "; ".join(reasons),
+                detail,
             )
             self._events.publish(
-                SetpointLimited(self._id, t_s, "; ".join(reasons), self.counters.setpoints_limited)
+                SetpointLimited(self._id, t_s, detail, self.counters.setpoints_limited)
             )
         self._limited_burst = bool(reasons)
         return limited
