@@ -162,7 +162,20 @@ def test_global_position_becomes_a_frame_in_the_mission_frame():
     assert frame.relative_altitude_m == 100.0
     assert frame.course_rad == pytest.approx(math.pi / 2)  # flying east
     assert frame.ground_speed_m_s == 15.0
+    assert (frame.v_east_m_s, frame.v_north_m_s) == (15.0, 0.0)
     assert frame.climb_rate_m_s == 1.0
+    assert frame.in_air  # 100 m above home, before any landed state arrived
+
+
+def test_a_vehicle_near_home_height_is_on_the_ground_until_it_says_otherwise():
+    vehicle = link()
+    frame = vehicle._frame(position(1_000, relative_alt=300))
+    assert frame is not None
+    assert not frame.in_air
+    vehicle._in_air = True
+    frame = vehicle._frame(position(1_100, relative_alt=300))
+    assert frame is not None
+    assert frame.in_air
 
 
 def test_course_of_a_vehicle_at_rest_is_its_heading():

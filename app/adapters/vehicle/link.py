@@ -87,8 +87,10 @@ class VehicleTelemetry:
     """One telemetry frame of one vehicle, stamped with the vehicle's own time.
 
     ``altitude_m`` is AMSL, ``relative_altitude_m`` above home; ``east_m``/``north_m``/``up_m``
-    are about the mission origin. ``link_ok`` is False on the copy of the last frame that is
-    published when the link is declared lost.
+    are about the mission origin; the ground velocity is in m/s. ``in_air`` is the autopilot's
+    landed state, or a height above home over ``LinkConfig.airborne_altitude_m`` before that
+    state arrives. ``link_ok`` is False on the copy of the last frame that is published when the
+    link is declared lost.
     """
 
     vehicle_id: int
@@ -102,6 +104,8 @@ class VehicleTelemetry:
     up_m: float
     course_rad: float
     ground_speed_m_s: float
+    v_east_m_s: float
+    v_north_m_s: float
     climb_rate_m_s: float
     flight_mode: str
     armed: bool

@@ -517,6 +517,7 @@ class MavsdkVehicleLink:
             course = math.radians(hdg / 100.0)
         else:
             course = course_from_velocity(v_east, v_north)
+        relative_altitude = int(f["relative_alt"]) / 1000.0
         east, north, up = self._origin.to_enu(lat, lon, alt)
         return VehicleTelemetry(
             vehicle_id=self._id,
@@ -524,16 +525,18 @@ class MavsdkVehicleLink:
             latitude_deg=lat,
             longitude_deg=lon,
             altitude_m=alt,
-            relative_altitude_m=int(f["relative_alt"]) / 1000.0,
+            relative_altitude_m=relative_altitude,
             east_m=east,
             north_m=north,
             up_m=up,
             course_rad=course,
             ground_speed_m_s=speed,
+            v_east_m_s=v_east,
+            v_north_m_s=v_north,
             climb_rate_m_s=-v_down,
             flight_mode=self._mode,
             armed=self._armed,
-            in_air=self._in_air,
+            in_air=self._in_air or relative_altitude > self._config.airborne_altitude_m,
             link_ok=True,
         )
 
@@ -656,9 +659,7 @@ class MavsdkVehicleLink:
 
     def _airborne(self) -> bool:
         latest = self._latest
-        return self._in_air or (
-            latest is not None and latest.relative_altitude_m > self._config.airborne_altitude_m
-        )
+        return self._in_air or (latest is not None and latest.in_air)
 
     async def take_off(self, timeout_s: float) -> None:
         # decide on a frame newer than the call: arming may just have launched the vehicle
