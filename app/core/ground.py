@@ -1,0 +1,178 @@
+"""The ground station's mission logic, pure: who flies, the fused target estimate, the stage.
+
+Mission time is the vehicles' own time, as their statuses carry it: the newest status time seen.
+A vehicle whose newest status is more than ``lost_after_s`` of mission time behind (it stopped
+answering), or that reports its link lost or itself unhealthy, leaves the active team; it rejoins
+when it reports healthy again. No wall clock is read, so the logic is the same at any speed-up.
+"""
+
+import math
+from dataclasses import dataclass, field, replace
+
+from app.core.estimation.federated import (
+    MainParams,
+    MainState,
+    main_allocate,
+    main_fuse,
+    main_receive,
+)
+from app.core.estimation.messages import GlobalEstimate, LocalEstimate
+from app.core.frames import TAU
+from app.core.stage import Stage, StageParams, StageState, TeamView, next_stage
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleReport:
+    """The newest status of one vehicle (m, rad clockwise from north, m/s)."""
+
+    t_s: float
+    east_m: float
+    north_m: float
+    course_rad: float
+    speed_m_s: float
+    link_ok: bool = True
+    healthy: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class GroundParams:
+    """``vehicles``: the team as launched (ids). ``tracking_command_t_s``: when the team is
+    sent from standby to track (mission time). ``fuse_period_s``: how often the main filter
+    fuses. ``lost_after_s``: mission-time silence after which a vehicle leaves the team."""
+
+    vehicles: tuple[int, ...]
+    radius_m: float
+    tracking_command_t_s: float
+    main: MainParams = field(default_factory=MainParams)
+    stages: StageParams = field(default_factory=StageParams)
+    fuse_period_s: float = 0.2
+    lost_after_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
+            raise ValueError(f"vehicles must be unique and non-empty, got {self.vehicles}")
+        for name in ("radius_m", "fuse_period_s", "lost_after_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        if not math.isfinite(self.tracking_command_t_s):
+            raise ValueError("tracking_command_t_s must be finite")
+
+
+@dataclass(frozen=True, slots=True)
+class GroundState:
+    reports: tuple[tuple[int, VehicleReport], ...] = ()
+    active: tuple[int, ...] = ()
+    main: MainState = field(default_factory=MainState)
+    fused: GlobalEstimate | None = None
+    stage: StageState = field(default_factory=StageState)
+    mission_t_s: float = -math.inf
+    next_fuse_t_s: float = -math.inf
+
+    def report(self, vehicle: int) -> VehicleReport | None:
+        return dict(self.reports).get(vehicle)
+
+
+@dataclass(frozen=True, slots=True)
+class GroundEvent:
+    t_s: float
+    kind: str
+    detail: str = ""
+
+
+def hear_status(state: GroundState, vehicle: int, report: VehicleReport) -> GroundState:
+    """Keep a vehicle's newest report and advance mission time (older reports are ignored)."""
+    held = dict(state.reports)
+    old = held.get(vehicle)
+    if old is not None and report.t_s < old.t_s:
+        return state
+    held[vehicle] = report
+    return replace(
+        state, reports=tuple(sorted(held.items())), mission_t_s=max(state.mission_t_s, report.t_s)
+    )
+
+
+def hear_local(state: GroundState, estimate: LocalEstimate) -> GroundState:
+    return replace(state, main=main_receive(state.main, estimate))
+
+
+def _active(state: GroundState, params: GroundParams) -> tuple[int, ...]:
+    now = state.mission_t_s
+    reports = dict(state.reports)
+    return tuple(
+        v
+        for v in params.vehicles
+        if (r := reports.get(v)) is not None
+        and r.link_ok
+        and r.healthy
+        and now - r.t_s <= params.lost_after_s
+    )
+
+
+def team_view(state: GroundState, params: GroundParams) -> TeamView:
+    """Distances to the circle and polar angles of the active team about the fused estimate."""
+    if state.fused is None:
+        return TeamView((), (), 0.0)
+    te, tn = state.fused.position_m
+    ve, vn = state.fused.velocity_m_s
+    reports = dict(state.reports)
+    dist, angles = [], []
+    for v in state.active:
+        r = reports[v]
+        dt = state.fused.t_s - r.t_s
+        e = r.east_m + r.speed_m_s * math.sin(r.course_rad) * dt
+        n = r.north_m + r.speed_m_s * math.cos(r.course_rad) * dt
+        dist.append(math.hypot(e - te, n - tn) - params.radius_m)
+        angles.append(math.atan2(n - tn, e - te) % TAU)
+    return TeamView(tuple(dist), tuple(angles), math.hypot(ve, vn))
+
+
+def tick(
+    state: GroundState, params: GroundParams
+) -> tuple[GroundState, GlobalEstimate | None, tuple[GroundEvent, ...]]:
+    """At the current mission time: update the active team, fuse when due, advance the stage.
+
+    Returns the new state, the fused estimate to publish (None when not due or nothing to fuse)
+    and events (vehicles leaving or rejoining, stage changes).
+    """
+    t = state.mission_t_s
+    events: list[GroundEvent] = []
+    active = _active(state, params)
+    for v in set(state.active) - set(active):
+        events.append(GroundEvent(t, "vehicle_left", f"vehicle {v} left the formation"))
+    for v in set(active) - set(state.active):
+        events.append(GroundEvent(t, "vehicle_joined", f"vehicle {v} is in the formation"))
+    state = replace(state, active=active)
+    fused = None
+    if t >= state.next_fuse_t_s:
+        fused = main_fuse(state.main, t, params.main)
+        main = state.main if fused is None else main_allocate(state.main, fused, params.main)
+        state = replace(
+            state,
+            main=main,
+            fused=fused if fused is not None else state.fused,
+            next_fuse_t_s=t + params.fuse_period_s,
+        )
+    commanded = t >= params.tracking_command_t_s
+    new_stage = next_stage(state.stage, t, commanded, team_view(state, params), params.stages)
+    if new_stage.stage is not state.stage.stage:
+        events.append(GroundEvent(t, "stage", new_stage.stage.value))
+    return replace(state, stage=new_stage), fused, tuple(events)
+
+
+def desired_spacing_rad(state: GroundState) -> float:
+    return TAU / max(1, len(state.active))
+
+
+__all__ = [
+    "GroundEvent",
+    "GroundParams",
+    "GroundState",
+    "Stage",
+    "VehicleReport",
+    "desired_spacing_rad",
+    "hear_local",
+    "hear_status",
+    "team_view",
+    "tick",
+]

@@ -1,0 +1,90 @@
+import math
+
+import numpy as np
+import pytest
+
+from app.core.estimation.messages import LocalEstimate
+from app.core.ground import (
+    GroundParams,
+    GroundState,
+    VehicleReport,
+    hear_local,
+    hear_status,
+    tick,
+)
+from app.core.stage import Stage
+
+PARAMS = GroundParams(vehicles=(0, 1, 2), radius_m=90.0, tracking_command_t_s=10.0)
+
+
+def on_circle(t, vehicle, angle_deg):
+    a = math.radians(angle_deg)
+    return VehicleReport(t, 90.0 * math.cos(a), 90.0 * math.sin(a), -a, 14.0)
+
+
+def local(vehicle, t, east=0.0, north=0.0, var=4.0):
+    x = np.array([east, 0.0, north, 0.0, 0.0, 0.0])
+    return LocalEstimate(str(vehicle), t, x, np.eye(6) * var, np.array([1.0]))
+
+
+def run(state, t, angles=(0.0, 120.0, 240.0), vehicles=(0, 1, 2)):
+    for v in vehicles:
+        state = hear_status(state, v, on_circle(t, v, angles[v]))
+        state = hear_local(state, local(v, t))
+    return tick(state, PARAMS)
+
+
+def test_fusion_of_three_equal_estimates_thirds_the_covariance():
+    state, fused, _ = run(GroundState(), 1.0)
+    assert fused is not None
+    assert np.allclose(fused.p, np.eye(6) * 4.0 / 3.0)
+    assert dict(fused.beta) == pytest.approx({"0": 1 / 3, "1": 1 / 3, "2": 1 / 3})
+    assert state.active == (0, 1, 2)
+
+
+def test_stages_follow_the_tracking_command_and_the_formation():
+    state = GroundState()
+    kinds = []
+    for k in range(200):
+        state, _, events = run(state, 0.1 * k)
+        kinds += [(round(e.t_s, 1), e.kind, e.detail) for e in events if e.kind == "stage"]
+    # standby until t = 10 s; the team is already on the circle, so gather ends at once and
+    # adjust after the 5 s dwell in formation
+    assert kinds == [(10.0, "stage", "gather"), (10.1, "stage", "adjust"), (15.1, "stage", "track")]
+    assert state.stage.stage is Stage.TRACK
+
+
+def test_a_silent_vehicle_leaves_and_rejoins():
+    state = GroundState()
+    state, _, events = run(state, 0.0)
+    left = []
+    for k in range(1, 40):
+        state, _, events = run(state, 0.1 * k, vehicles=(0, 2))
+        left += [e for e in events if e.kind == "vehicle_left"]
+    assert [e.detail for e in left] == ["vehicle 1 left the formation"]
+    assert left[0].t_s == pytest.approx(2.1)  # more than lost_after_s = 2 s behind
+    assert state.active == (0, 2)
+    state, _, events = run(state, 4.0)
+    assert [e.kind for e in events] == ["vehicle_joined"]
+    assert state.active == (0, 1, 2)
+
+
+def test_a_vehicle_reporting_a_lost_link_is_left_out():
+    state, _, _ = run(GroundState(), 0.0)
+    report = VehicleReport(0.1, 90.0, 0.0, 0.0, 14.0, link_ok=False)
+    state = hear_status(state, 0, report)
+    state, _, events = tick(state, PARAMS)
+    assert state.active == (1, 2)
+    assert events[0].kind == "vehicle_left"
+
+
+def test_older_reports_never_replace_newer_ones():
+    state = hear_status(GroundState(), 0, on_circle(5.0, 0, 0.0))
+    assert hear_status(state, 0, on_circle(4.0, 0, 90.0)) is state
+
+
+def test_bad_params_are_refused():
+    with pytest.raises(ValueError, match="unique"):
+        GroundParams(vehicles=(0, 0), radius_m=90.0, tracking_command_t_s=0.0)
+    with pytest.raises(ValueError, match="radius_m"):
+        GroundParams(vehicles=(0,), radius_m=-1.0, tracking_command_t_s=0.0)
