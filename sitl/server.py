@@ -160,8 +160,8 @@ class SimulatorServer:
         self._wind = config.wind
         self._gust_east_m_s = 0.0
         self._gust_north_m_s = 0.0
-        self._geo_tick = -1
         self._geo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._geo_observed: list[tuple[SimVehicle, Observation]] = []
         self._geo_lookups = tuple(
             functools.partial(self._geo_of, i) for i in range(len(self.vehicles))
         )
@@ -337,15 +337,21 @@ class SimulatorServer:
             await asyncio.sleep(max(MIN_SLEEP_WALL_S, next_wall - self._clock()))
 
     def _substep(self, dt: float, wall_s: float) -> None:
+        """One physics step of every vehicle, then the telemetry and camera frames now due.
+
+        All vehicles move first, so every message of a step describes the same instant; the
+        geodetic positions of the vehicles and of the camera fixes of a step are converted in
+        one pymap3d call (its cost is mostly per call, not per point).
+        """
         wind_e, wind_n = self._step_wind(dt)
         self._tick += 1
         t = self.time_s
+        outs: list[list[Outgoing]] = []
         observed: list[tuple[SimVehicle, Observation]] = []
         target: TargetState | None = None
-        for vehicle, link in zip(self.vehicles, self._links, strict=True):
+        for vehicle in self.vehicles:
             vehicle.wind_east_m_s, vehicle.wind_north_m_s = wind_e, wind_n
-            out = vehicle.advance(dt, t, wall_s, wind_e, wind_n)
-            out.extend(vehicle.telemetry(t, self._geo_lookups[vehicle.index]))
+            outs.append(vehicle.advance(dt, t, wall_s, wind_e, wind_n))
             if vehicle.camera_due(t):
                 if target is None:
                     target = self.config.target.state_at(t)
@@ -353,15 +359,15 @@ class SimulatorServer:
                 obs = vehicle.camera.observe(t, s.east_m, s.north_m, vehicle.altitude_m, target)
                 if obs is not None and vehicle.in_air:
                     observed.append((vehicle, obs))
+        self._geo_observed = observed
+        self._geo = None
+        for vehicle, link, out in zip(self.vehicles, self._links, outs, strict=True):
+            out.extend(vehicle.telemetry(t, self._geo_lookups[vehicle.index]))
             self._send(link, out)
-        if observed:
-            east = np.array([o.east_m for _, o in observed])
-            north = np.array([o.north_m for _, o in observed])
-            lat, lon, alt = self._geodesy.to_geodetic_many(east, north, np.zeros_like(east))
-            for k, (vehicle, obs) in enumerate(observed):
-                self.observations.append((vehicle.system_id, obs))
-                msg = vehicle.tracking_message(obs, float(lat[k]), float(lon[k]), float(alt[k]))
-                self._send(self._links[vehicle.index], [msg])
+        for k, (vehicle, obs) in enumerate(observed):
+            self.observations.append((vehicle.system_id, obs))
+            lat, lon, alt = self._geo_of(len(self.vehicles) + k)
+            self._send(self._links[vehicle.index], [vehicle.tracking_message(obs, lat, lon, alt)])
 
     def _step_wind(self, dt: float) -> tuple[float, float]:
         w = self._wind
@@ -376,12 +382,12 @@ class SimulatorServer:
         return w.east_m_s + self._gust_east_m_s, w.north_m_s + self._gust_north_m_s
 
     def _geo_of(self, index: int) -> tuple[float, float, float]:
-        if self._geo_tick != self._tick or self._geo is None:
-            east = np.array([v.state.east_m for v in self.vehicles])
-            north = np.array([v.state.north_m for v in self.vehicles])
-            up = np.array([v.altitude_m for v in self.vehicles])
-            self._geo = self._geodesy.to_geodetic_many(east, north, up)
-            self._geo_tick = self._tick
+        """Geodetic position of vehicle ``index`` (or, past the vehicles, of a camera fix)."""
+        if self._geo is None:
+            points = [(v.state.east_m, v.state.north_m, v.altitude_m) for v in self.vehicles]
+            points.extend((o.east_m, o.north_m, 0.0) for _, o in self._geo_observed)
+            enu = np.array(points, dtype=np.float64)
+            self._geo = self._geodesy.to_geodetic_many(enu[:, 0], enu[:, 1], enu[:, 2])
         lat, lon, alt = self._geo
         return float(lat[index]), float(lon[index]), float(alt[index])
 
