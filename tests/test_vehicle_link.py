@@ -8,9 +8,15 @@ from typing import Any
 
 import pytest
 from mavsdk.asyncio import MavsdkConnectionError
+from mavsdk.plugins.action import ActionError, ActionResult
 
-from app.adapters.vehicle.autopilots import SetpointLimits
-from app.adapters.vehicle.link import GeodeticOrigin, LinkLost, VehicleClockReset
+from app.adapters.vehicle.autopilots import SetpointLimits, VelocityAdapter
+from app.adapters.vehicle.link import (
+    CourseSpeedCommand,
+    GeodeticOrigin,
+    LinkLost,
+    VehicleClockReset,
+)
 from app.adapters.vehicle.mavsdk_link import (
     LinkConfig,
     MavsdkHub,
@@ -276,3 +282,55 @@ async def test_watchdog_declares_the_link_lost_after_the_timeout_of_silence():
     assert frame.t_s == 3.0
     assert not vehicle.link_ok
     assert vehicle.counters.link_losses == 1
+
+
+# ---- commands on an unopened link with recorders in place of the plugins ------------------------
+
+
+class RefusingAction:
+    def __init__(self, result: ActionResult) -> None:
+        self.result = result
+        self.calls = 0
+
+    async def arm(self) -> None:
+        self.calls += 1
+        raise ActionError(self.result, "arm()")
+
+
+async def test_a_refused_arm_is_a_link_error_with_the_result():
+    vehicle = link()
+    action = RefusingAction(ActionResult.COMMAND_DENIED)
+    vehicle._action = action
+    with pytest.raises(LinkError, match="vehicle 4: arm refused: COMMAND_DENIED") as info:
+        await vehicle.arm()
+    assert isinstance(info.value.__cause__, ActionError)
+    vehicle._armed = True
+    await vehicle.arm()  # already armed: nothing asked
+    assert action.calls == 1
+
+
+class AcceptingOffboard:
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    async def set_velocity_ned(self, velocity_ned_yaw: Any) -> None:
+        self.calls.append("velocity")
+
+    async def start(self) -> None:
+        self.calls.append("start")
+
+
+async def test_an_offboard_start_the_vehicle_acks_but_never_shows_is_a_link_error():
+    config = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), mode_confirm_timeout_s=0.1)
+    vehicle = link(config=config)
+    offboard = AcceptingOffboard()
+    vehicle._adapter = VelocityAdapter(vehicle_id=4, offboard=offboard, limits=config.limits)  # type: ignore[arg-type]
+    vehicle._latest = vehicle._frame(position(2_000))
+    vehicle._mode = "HOLD"
+    with pytest.raises(
+        LinkError, match=r"vehicle 4 accepted OFFBOARD but still reports HOLD after 0\.1 s"
+    ):
+        await vehicle.start_offboard(CourseSpeedCommand(math.pi / 2, 15.0))
+    assert offboard.calls == ["velocity", "start"]
+    with pytest.raises(LinkError, match="start_offboard before send"):
+        await vehicle.send(CourseSpeedCommand(math.pi / 2, 15.0))

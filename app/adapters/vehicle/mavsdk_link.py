@@ -702,15 +702,21 @@ class MavsdkVehicleLink:
             try:
                 await adapter.start(setpoint, self._altitude(setpoint), state)
                 self._record(setpoint, state.t_s)
-                await self._wait_for(
-                    lambda: self._mode == adapter.control_mode,
-                    self._config.mode_confirm_timeout_s,
-                    f"accepted {adapter.control_mode} but reports {self._mode}",
-                )
+                await self._confirm_mode(adapter.control_mode)
             except BaseException:
                 self._offboard = "idle"
                 raise
             self._offboard = "active"
+
+    async def _confirm_mode(self, mode: str) -> None:
+        timeout_s = self._config.mode_confirm_timeout_s
+        try:
+            await self._wait_for(lambda: self._mode == mode, timeout_s, f"no {mode}")
+        except LinkError as exc:
+            raise LinkError(
+                f"vehicle {self._id} accepted {mode} but still reports {self._mode} "
+                f"after {timeout_s} s"
+            ) from exc
 
     def _altitude(self, command: CourseSpeedCommand) -> float:
         if command.altitude_m is not None:
