@@ -27,7 +27,7 @@ Positive = Annotated[float, Field(gt=0.0)]
 State = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Row = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Covariance = Annotated[tuple[Row, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
-Stage = Literal["gather", "adjust", "track"]
+Stage = Literal["standby", "gather", "adjust", "track"]
 
 _SYMMETRY_RTOL = 1e-6
 
