@@ -84,6 +84,7 @@ class LocalEstimate(Message):
     vehicle: VehicleId
     x: State
     P: Covariance
+    q_scale: Positive = 1.0  # the process-noise multiplier the local filter runs with (beta^-1)
 
     @model_validator(mode="after")
     def _covariance(self) -> Self:
@@ -99,9 +100,17 @@ class LocalEstimate(Message):
         vehicle: int,
         x: ArrayLike,
         P: ArrayLike,
+        q_scale: float = 1.0,
     ) -> LocalEstimate:
         """Build from numpy arrays or nested sequences of shape (6,) and (6, 6)."""
-        return cls(sender=sender, t_s=t_s, vehicle=vehicle, x=_vector(x), P=_matrix(P))
+        return cls(
+            sender=sender,
+            t_s=t_s,
+            vehicle=vehicle,
+            x=_vector(x),
+            P=_matrix(P),
+            q_scale=float(q_scale),
+        )
 
 
 class GlobalEstimate(Message):
