@@ -287,6 +287,23 @@ async def test_watchdog_declares_the_link_lost_after_the_timeout_of_silence():
 # ---- commands on an unopened link with recorders in place of the plugins ------------------------
 
 
+class AcceptingOffboard:
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    async def set_velocity_ned(self, velocity_ned_yaw: Any) -> None:
+        self.calls.append("velocity")
+
+    async def set_position_velocity_ned(self, position_ned_yaw: Any, velocity_ned_yaw: Any) -> None:
+        self.calls.append("position+velocity")
+
+    async def start(self) -> None:
+        self.calls.append("start")
+
+    async def stop(self) -> None:
+        self.calls.append("stop")
+
+
 class RefusingAction:
     def __init__(self, result: ActionResult) -> None:
         self.result = result
@@ -297,8 +314,16 @@ class RefusingAction:
         raise ActionError(self.result, "arm()")
 
 
+async def test_commands_on_a_link_that_is_not_open_say_so():
+    with pytest.raises(LinkError, match="link not open"):
+        await link().arm()
+
+
 async def test_a_refused_arm_is_a_link_error_with_the_result():
     vehicle = link()
+    vehicle._adapter = VelocityAdapter(
+        vehicle_id=4, offboard=AcceptingOffboard(), limits=CONFIG.limits
+    )
     action = RefusingAction(ActionResult.COMMAND_DENIED)
     vehicle._action = action
     with pytest.raises(LinkError, match="vehicle 4: arm refused: COMMAND_DENIED") as info:
@@ -309,22 +334,11 @@ async def test_a_refused_arm_is_a_link_error_with_the_result():
     assert action.calls == 1
 
 
-class AcceptingOffboard:
-    def __init__(self) -> None:
-        self.calls: list[str] = []
-
-    async def set_velocity_ned(self, velocity_ned_yaw: Any) -> None:
-        self.calls.append("velocity")
-
-    async def start(self) -> None:
-        self.calls.append("start")
-
-
 async def test_an_offboard_start_the_vehicle_acks_but_never_shows_is_a_link_error():
     config = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), mode_confirm_timeout_s=0.1)
     vehicle = link(config=config)
     offboard = AcceptingOffboard()
-    vehicle._adapter = VelocityAdapter(vehicle_id=4, offboard=offboard, limits=config.limits)  # type: ignore[arg-type]
+    vehicle._adapter = VelocityAdapter(vehicle_id=4, offboard=offboard, limits=config.limits)
     vehicle._latest = vehicle._frame(position(2_000))
     vehicle._mode = "HOLD"
     with pytest.raises(

@@ -650,6 +650,7 @@ class MavsdkVehicleLink:
         return latest
 
     async def arm(self) -> None:
+        self._require_adapter()
         if self._armed:
             return
         try:
@@ -662,6 +663,7 @@ class MavsdkVehicleLink:
         return self._in_air or (latest is not None and latest.in_air)
 
     async def take_off(self, timeout_s: float) -> None:
+        self._require_adapter()
         # decide on a frame newer than the call: arming may just have launched the vehicle
         before = self._latest
         with contextlib.suppress(LinkError):
