@@ -283,6 +283,23 @@ class SimulatorServer:
             yield await self.wait_until(t)
             t += period_s
 
+    def run_offline(self, duration_s: float) -> SimTruth:
+        """Advance ``duration_s`` of simulated time at once, with no sockets and no clock.
+
+        For determinism checks and for stepping a scenario fast without clients; telemetry is
+        built but goes nowhere, and wall time is taken to pass at 1/speedup of simulated time.
+        Refused while the server is running.
+        """
+        if self._stack is not None:
+            raise RuntimeError("run_offline is for a server that is not running")
+        if not (math.isfinite(duration_s) and duration_s >= 0.0):
+            raise ValueError(f"duration_s must be finite and >= 0, got {duration_s!r}")
+        dt = self.config.physics_dt_s
+        wall = self._clock()
+        for i in range(round(duration_s / dt)):
+            self._substep(dt, wall + (i + 1) * dt / self._speedup)  # wall time as if running
+        return self.truth()
+
     # ---- faults ------------------------------------------------------------------------------
 
     def set_link(self, index: int, up: bool) -> None:
