@@ -34,8 +34,9 @@ def seat_errors(phases_rad: Sequence[float]) -> tuple[float, ...]:
     theta_d1 = (theta_1 + theta_2 + theta_3 - 2 pi) / 3 is the mean of the offsets
     o_j = theta_j - 2 pi j / n; it minimises V_p = sum (Delta theta_i)^2 of eq. (22) (the sum of
     |Delta theta_i| of eq. (28) is minimised by their median; for n = 3 the paper gives the mean,
-    which is what is implemented). The offsets are unwrapped about the first vehicle's, so the
-    errors sum to zero and each is in (-pi, pi].
+    which is what is implemented). theta_j is unwrapped going round the orbit from vehicle 0
+    (in [theta_0, theta_0 + 2 pi)); which vehicle starts the count only shifts every offset by
+    the same amount, so the errors do not depend on it. They sum to zero.
 
     Returns
     -------
@@ -53,7 +54,7 @@ def seat_errors(phases_rad: Sequence[float]) -> tuple[float, ...]:
     ref = phases_rad[order[0]]
     offsets = [0.0] * n
     for rank, i in enumerate(order):
-        offsets[i] = _wrap_pi(phases_rad[i] - ref - TAU * rank / n)
+        offsets[i] = (phases_rad[i] - ref) % TAU - TAU * rank / n
     mean = sum(offsets) / n
     return tuple(mean - o for o in offsets)
 
@@ -205,17 +206,17 @@ def arc_shift_m(
     limit_speed_m_s: float,
     max_accel_m_s2: float,
 ) -> float:
-    """Largest change of distance flown (m) against cruising, within ``duration_s``, by a vehicle
-    that leaves cruise speed and is back at it at the end, with |v - cruise| <= |limit - cruise|
-    and |a| <= max_accel: a trapezoid (or triangle) of speed deviation."""
-    dv = abs(limit_speed_m_s - cruise_speed_m_s)
-    t_ramp = dv / max_accel_m_s2
+    """Largest change of distance flown (m) against cruising within ``duration_s``, by a vehicle
+    that leaves cruise speed at t = 0 with |a| <= max_accel for a speed limit ``limit_speed_m_s``:
+    ramp to the limit, then hold it. (The need to come back to cruise speed is ignored, so the
+    bound built on it is a true lower bound.)"""
     if duration_s <= 0.0:
         return 0.0
-    if duration_s >= 2.0 * t_ramp:
-        return dv * (duration_s - t_ramp)
-    half = 0.5 * duration_s
-    return max_accel_m_s2 * half * half
+    dv = abs(limit_speed_m_s - cruise_speed_m_s)
+    t_ramp = dv / max_accel_m_s2
+    if duration_s >= t_ramp:
+        return dv * duration_s - 0.5 * dv * t_ramp
+    return 0.5 * max_accel_m_s2 * duration_s * duration_s
 
 
 def phase_time_lower_bound(
@@ -230,7 +231,8 @@ def phase_time_lower_bound(
     """Shortest time (s) in which speed changes alone can bring every offset within tolerance.
 
     ``offsets_rad`` are o_j = theta_j - 2 pi j / n (in orbit order, unwrapped) of vehicles that
-    all fly the circle r_d. A vehicle can move its phase against cruising by at most
+    all fly the circle r_d (vehicles still outside it move their phase less per metre, so the
+    bound holds for them too). A vehicle can move its phase against cruising by at most
     arc_shift(T, max speed) / r_d forward and arc_shift(T, min speed) / r_d backward. Spacing
     needs every adjacent difference within ``tolerance_rad``, which needs the spread of the
     offsets within tolerance * floor(n / 2); the bound is the least T for which some common

@@ -9,7 +9,7 @@ spacing) are pure functions of the result.
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +23,7 @@ from app.core.agent import (
     TargetInfo,
     agent_step,
 )
+from app.core.phase import orbit_order, phase_time_lower_bound
 from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 from sitl.target import TargetPath
 
@@ -240,3 +241,84 @@ def phase_settle_time_s(
     n = phases_rad.shape[1]
     gaps = adjacent_phase_differences(phases_rad)
     return settle_time_s(t_s, gaps - TAU / n, tolerance_rad)
+
+
+@dataclass(frozen=True, slots=True)
+class StandoffFigures:
+    """What ``standoff simulate`` prints for distance keeping, over all vehicles.
+
+    ``settle_s``: time after which |r - r_d| < 3 m holds to the end (inf: never);
+    ``min_distance_error_m``: smallest r - r_d (negative: inside the circle);
+    ``crossings``: entries into the circle deeper than 0.5 m (``circle_crossings``);
+    ``peak_course_rate_rad_s``: largest |course rate| flown.
+    """
+
+    settle_s: float
+    min_distance_error_m: float
+    crossings: int
+    peak_course_rate_rad_s: float
+
+
+def standoff_figures(
+    result: SimulationResult, settle_tolerance_m: float = 3.0, crossing_depth_m: float = 0.5
+) -> StandoffFigures:
+    """The distance-keeping figures of a run (see ``StandoffFigures``)."""
+    error = result.distance_error_m()
+    return StandoffFigures(
+        settle_s=settle_time_s(result.t_s, error, settle_tolerance_m),
+        min_distance_error_m=float(error.min()),
+        crossings=circle_crossings(error, crossing_depth_m),
+        peak_course_rate_rad_s=float(np.abs(result.course_rate_rad_s).max()),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class PhaseFigures:
+    """Spacing figures: when every adjacent gap is within tolerance of 2 pi / n for good (s),
+    and the speed range (m/s) and largest |acceleration| (m/s^2) flown."""
+
+    settle_s: float
+    min_speed_m_s: float
+    max_speed_m_s: float
+    max_abs_accel_m_s2: float
+
+
+def phase_figures(
+    result: SimulationResult, tolerance_rad: float = math.radians(2.0)
+) -> PhaseFigures:
+    """The phase-keeping figures of a run (see ``PhaseFigures``)."""
+    return PhaseFigures(
+        settle_s=phase_settle_time_s(result.t_s, result.phases_rad(), tolerance_rad),
+        min_speed_m_s=float(result.speed_m_s.min()),
+        max_speed_m_s=float(result.speed_m_s.max()),
+        max_abs_accel_m_s2=float(np.abs(result.accel_m_s2).max()),
+    )
+
+
+def phase_lower_bound_s(setup: SimulationSetup, tolerance_rad: float = math.radians(2.0)) -> float:
+    """Speed-limited lower bound on the spacing time of ``setup`` (any speed-based controller).
+
+    Runs the team at cruise speed with no phase keeping, takes each vehicle's phase at the end
+    (all on the circle by then; phases at cruise keep their differences), and asks
+    ``phase.phase_time_lower_bound`` how soon speed changes within the limits could bring the
+    offsets together. Speed changes made before a vehicle reaches the circle move its phase less
+    than on the circle, and the path's shape is taken as the cruise path, so this is a lower bound
+    up to that small approximation.
+    """
+    cruise_agents = tuple(replace(a, phase=replace(a.phase, law="none")) for a in setup.agents)
+    result = run_simulation(replace(setup, agents=cruise_agents))
+    phases = [float(p) for p in result.phases_rad()[-1]]
+    order = orbit_order(phases)
+    ref = phases[order[0]]
+    n = len(phases)
+    offsets = [(phases[i] - ref) % TAU - TAU * rank / n for rank, i in enumerate(order)]
+    env = setup.agents[0].envelope
+    return phase_time_lower_bound(
+        offsets,
+        setup.agents[0].guidance.radius_m,
+        env.cruise_speed_m_s,
+        env.min_speed_m_s,
+        env.max_speed_m_s,
+        env.max_accel_m_s2,
+        tolerance_rad,
+    )
