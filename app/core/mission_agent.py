@@ -20,6 +20,7 @@ orbiting the target without phase keeping, so it never steers on a stale spacing
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 from app.core.agent import (
     AgentEvent,
@@ -36,7 +37,8 @@ from app.core.estimation.local import LocalParams, LocalState, StepReport, local
 from app.core.estimation.messages import GlobalEstimate, Observation
 from app.core.estimation.models import MotionModel
 
-STAGES = ("standby", "gather", "adjust", "track")
+StageName = Literal["standby", "gather", "adjust", "track"]
+STAGES: tuple[StageName, ...] = ("standby", "gather", "adjust", "track")
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +103,7 @@ class MissionAgentState:
     guidance: AgentState = field(default_factory=AgentState)
     standby_guidance: AgentState = field(default_factory=AgentState)
     fused: GlobalEstimate | None = None
-    stage: str = "standby"
+    stage: StageName = "standby"
     active: tuple[int, ...] = ()
     teammates: tuple[tuple[int, TeammateFix], ...] = ()
     holding: bool = False

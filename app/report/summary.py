@@ -22,6 +22,7 @@ class VehicleSample:
     east_m: float
     north_m: float
     speed_m_s: float
+    course_rad: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,283 @@
+"""One vehicle's agent loop: the vehicle link and the bus around the pure mission logic.
+
+Every telemetry frame from the vehicle is one control tick (``mission_agent.control``) whose
+command goes straight back to the vehicle; the camera's observations feed the local filter and
+are published for the ground station; the fused estimate, the mission state and the teammates'
+statuses arrive from the bus. Nothing here blocks the control path: a refused command is logged
+and counted, a vehicle that left offboard is put back under control at most every
+``retry_offboard_s``, a malformed message never reaches this loop (the bus drops it).
+"""
+
+import asyncio
+import logging
+import math
+from dataclasses import dataclass
+
+from app.adapters.bus import Bus, Subscription, topics
+from app.adapters.bus import messages as bus
+from app.adapters.vehicle.link import (
+    CourseSpeedCommand,
+    LinkLost,
+    LinkRestored,
+    OffboardLostError,
+    VehicleLink,
+)
+from app.core import mission_agent as logic
+from app.core.agent import OwnTelemetry
+from app.core.estimation.messages import Observation
+from app.errors import LinkError
+from app.runtime.events import EventSink
+from app.runtime.wire import global_to_core, local_to_bus, observation_to_core
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class AgentRuntimeParams:
+    """Timing of the loop (vehicle time, s) and the altitude to hold (m above home)."""
+
+    altitude_m: float | None = None
+    status_period_s: float = 0.1
+    estimate_period_s: float = 0.2
+    retry_offboard_s: float = 2.0
+
+
+@dataclass
+class AgentCounters:
+    ticks: int = 0
+    commands_refused: int = 0
+    offboard_restarts: int = 0
+    observations_used: int = 0
+    observations_dropped: int = 0
+
+
+class VehicleAgent:
+    """Runs one vehicle until cancelled; ``run`` is the whole agent."""
+
+    def __init__(
+        self,
+        params: logic.MissionAgentParams,
+        link: VehicleLink,
+        bus_client: Bus,
+        events: EventSink,
+        runtime: AgentRuntimeParams = AgentRuntimeParams(),
+    ) -> None:
+        self.params = params
+        self.name = f"agent-{params.vehicle}"
+        self.state = logic.initial_agent_state(params)
+        self.counters = AgentCounters()
+        self._link = link
+        self._bus = bus_client
+        self._events = events
+        self._runtime = runtime
+        self._next_status_t = -math.inf
+        self._next_estimate_t = -math.inf
+        self._next_offboard_retry_t = -math.inf
+        self._last_t = 0.0
+
+    async def run(self) -> None:
+        v = self.params.vehicle
+        async with (
+            self._bus.subscribe(topics.observation(v)) as observations,
+            self._bus.subscribe(topics.GLOBAL_ESTIMATE) as fused,
+            self._bus.subscribe(topics.MISSION) as mission,
+            self._bus.subscribe(topics.ALL_STATUS) as statuses,
+            self._bus.subscribe(topics.ALL_COMMANDS) as commands,
+            asyncio.TaskGroup() as tg,
+        ):
+            tg.create_task(self._control(), name=f"{self.name}-control")
+            tg.create_task(self._camera(), name=f"{self.name}-camera")
+            tg.create_task(self._link_events(), name=f"{self.name}-link-events")
+            tg.create_task(self._hear(observations), name=f"{self.name}-observations")
+            tg.create_task(self._hear(fused), name=f"{self.name}-fused")
+            tg.create_task(self._hear(mission), name=f"{self.name}-mission")
+            tg.create_task(self._hear(statuses), name=f"{self.name}-team")
+            tg.create_task(self._hear(commands), name=f"{self.name}-commands")
+
+    # --- the control path -----------------------------------------------------------------
+
+    async def _control(self) -> None:
+        async for frame in self._link.telemetry():
+            t = frame.t_s
+            self._last_t = t
+            own = OwnTelemetry(
+                frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s
+            )
+            try:
+                self.state, command, agent_events = logic.control(self.state, t, own, self.params)
+            except ValueError as exc:  # a non-finite frame: never steer on it
+                self._events.emit(
+                    "telemetry_rejected", t, vehicle=self.params.vehicle, reason=str(exc)
+                )
+                continue
+            self.counters.ticks += 1
+            for event in agent_events:
+                self._events.emit(
+                    event.kind, event.t_s, vehicle=self.params.vehicle, detail=event.detail
+                )
+            if not self.state.holding:
+                await self._send(
+                    t,
+                    CourseSpeedCommand(
+                        command.course_rad, command.speed_m_s, self._runtime.altitude_m
+                    ),
+                )
+            if t >= self._next_status_t:
+                self._next_status_t = t + self._runtime.status_period_s
+                await self._publish_status(t, own)
+
+    async def _send(self, t: float, command: CourseSpeedCommand) -> None:
+        try:
+            await self._link.send(command)
+        except OffboardLostError as exc:
+            if t >= self._next_offboard_retry_t:
+                self._next_offboard_retry_t = t + self._runtime.retry_offboard_s
+                self.counters.offboard_restarts += 1
+                self._events.emit(
+                    "offboard_restart", t, vehicle=self.params.vehicle, reason=str(exc)
+                )
+                try:
+                    await self._link.start_offboard(command)
+                except LinkError as retry_exc:
+                    self._events.emit(
+                        "offboard_refused", t, vehicle=self.params.vehicle, reason=str(retry_exc)
+                    )
+        except LinkError as exc:
+            self.counters.commands_refused += 1
+            self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
+
+    async def _publish_status(self, t: float, own: OwnTelemetry) -> None:
+        target = logic.target_at(self.state, t, self.params)
+        phase = (
+            0.0
+            if target is None
+            else math.atan2(own.north_m - target.north_m, own.east_m - target.east_m)
+        )
+        latest = self._link.latest
+        status = bus.VehicleStatus(
+            sender=self.name,
+            t_s=t,
+            vehicle=self.params.vehicle,
+            east_m=own.east_m,
+            north_m=own.north_m,
+            alt_m=latest.relative_altitude_m if latest is not None else 0.0,
+            course_rad=own.course_rad,
+            speed_m_s=max(own.speed_m_s, 0.0),
+            phase_rad=phase,
+            stage=self.state.stage,
+            link="ok" if self._link.link_ok else "lost",
+            healthy=not self.state.holding,
+        )
+        await self._bus.publish(topics.status(self.params.vehicle), status)
+
+    # --- what the agent hears ---------------------------------------------------------------
+
+    async def _camera(self) -> None:
+        async for seen in self._link.observations():
+            obs = Observation(seen.t_s, self.params.sensor, seen.east_m, seen.north_m, seen.sigma_m)
+            await self._use_observation(obs)
+            message = bus.TargetObservation(
+                sender=self.name,
+                t_s=seen.t_s,
+                sensor=f"camera-{self.params.vehicle}",
+                vehicle=self.params.vehicle,
+                east_m=seen.east_m,
+                north_m=seen.north_m,
+                sigma_m=seen.sigma_m
+                if seen.sigma_m is not None and seen.sigma_m > 0.0
+                else self.params.local.default_sigma_m,
+            )
+            await self._bus.publish(topics.observation(self.params.vehicle), message)
+
+    async def _use_observation(self, obs: Observation) -> None:
+        self.state, report = logic.observe(self.state, obs, self.params)
+        if not report.used:
+            self.counters.observations_dropped += 1
+            self._events.emit(
+                "observation_dropped",
+                obs.t_s,
+                vehicle=self.params.vehicle,
+                outcome=report.outcome,
+                reason=report.reason,
+            )
+            return
+        self.counters.observations_used += 1
+        if obs.t_s >= self._next_estimate_t:
+            estimate = self.state.local.estimate()
+            if estimate is not None:
+                self._next_estimate_t = obs.t_s + self._runtime.estimate_period_s
+                await self._bus.publish(
+                    topics.local_estimate(self.params.vehicle),
+                    local_to_bus(estimate, self.params.vehicle, self.name),
+                )
+
+    async def _hear(self, subscription: Subscription) -> None:
+        async for _topic, message in subscription:
+            match message:
+                case bus.TargetObservation() if message.sender != self.name:
+                    await self._use_observation(observation_to_core(message, self.params.vehicle))
+                case bus.GlobalEstimate():
+                    self.state = logic.hear_fused(self.state, global_to_core(message), self.params)
+                case bus.MissionState():
+                    before = self.state.stage
+                    self.state = logic.hear_mission(self.state, message.stage, message.active)
+                    if self.state.stage != before:
+                        self._events.emit(
+                            "agent_stage",
+                            message.t_s,
+                            vehicle=self.params.vehicle,
+                            stage=message.stage,
+                        )
+                case bus.VehicleStatus() if message.vehicle != self.params.vehicle:
+                    fix = logic.TeammateFix(
+                        message.t_s,
+                        message.east_m,
+                        message.north_m,
+                        message.course_rad,
+                        message.speed_m_s,
+                    )
+                    self.state = logic.hear_teammate(self.state, message.vehicle, fix)
+                case bus.Command() if (
+                    message.vehicles is None or self.params.vehicle in message.vehicles
+                ):
+                    await self._obey(message)
+                case _:
+                    pass
+
+    async def _obey(self, message: bus.Command) -> None:
+        t = self._last_t
+        self._events.emit("command", t, vehicle=self.params.vehicle, command=message.command)
+        try:
+            if message.command in ("hold", "shutdown"):
+                self.state = logic.set_holding(self.state, True)
+                await self._link.hold()
+            elif message.command == "resume" and self.state.holding:
+                self.state = logic.set_holding(self.state, False)
+                latest = self._link.latest
+                course = latest.course_rad if latest is not None else 0.0
+                await self._link.start_offboard(
+                    CourseSpeedCommand(
+                        course,
+                        self.params.agent.envelope.cruise_speed_m_s,
+                        self._runtime.altitude_m,
+                    )
+                )
+        except LinkError as exc:
+            self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
+
+    async def _link_events(self) -> None:
+        async for event in self._link.events():
+            match event:
+                case LinkLost():
+                    self._events.emit(
+                        "link_lost", event.t_s, vehicle=self.params.vehicle, silent_s=event.silent_s
+                    )
+                case LinkRestored():
+                    self._events.emit("link_restored", event.t_s, vehicle=self.params.vehicle)
+                case _:
+                    self._events.emit(
+                        type(event).__name__,
+                        event.t_s,
+                        vehicle=self.params.vehicle,
+                        detail=repr(event),
+                    )
