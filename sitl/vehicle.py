@@ -493,11 +493,15 @@ class SimVehicle:
         out = [self._heartbeat()] if changed else []
         return mavlink.MAV_RESULT_ACCEPTED, out
 
+    def arm(self, t_s: float) -> None:
+        """Arm and launch, as MAV_CMD_COMPONENT_ARM_DISARM does (no-op when armed)."""
+        if not self.armed:
+            self.armed = True
+            self._launch(t_s)
+
     def _arm_disarm(self, arm: bool, force: bool, t_s: float) -> int:
         if arm:
-            if not self.armed:
-                self.armed = True
-                self._launch(t_s)
+            self.arm(t_s)
             return int(mavlink.MAV_RESULT_ACCEPTED)
         if self.in_air and not force:
             return int(mavlink.MAV_RESULT_DENIED)
