@@ -95,6 +95,7 @@ _DEFAULT_STREAMS: Final[dict[int, float | None]] = {
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: -1.0,  # on request (MAVSDK attitude_quaternion)
 }
 
 Outgoing = tuple[int, mavlink.MAVLink_message]  # (source component id, message)
@@ -660,6 +661,14 @@ class SimVehicle:
             roll = math.atan(s.speed_m_s * s.course_rate_rad_s / GRAVITY_M_S2)
             return AUTOPILOT_COMPONENT, mavlink.MAVLink_attitude_message(
                 boot_ms, roll, 0.0, wrap_pi(heading), 0.0, 0.0, s.course_rate_rad_s
+            )
+        if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
+            roll = math.atan(s.speed_m_s * s.course_rate_rad_s / GRAVITY_M_S2)
+            cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+            cy, sy = math.cos(0.5 * heading), math.sin(0.5 * heading)
+            # yaw then roll (pitch 0): q = q_yaw * q_roll
+            return AUTOPILOT_COMPONENT, mavlink.MAVLink_attitude_quaternion_message(
+                boot_ms, cy * cr, cy * sr, sy * sr, sy * cr, 0.0, 0.0, s.course_rate_rad_s
             )
         if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
             return AUTOPILOT_COMPONENT, mavlink.MAVLink_local_position_ned_message(

@@ -390,3 +390,48 @@ def test_loiter_radius_tighter_than_the_vehicle_can_turn_is_refused():
         VehicleConfig(
             limits=default_limits(), start=FixedWingState(0, 0, 0, 18), cruise_speed_m_s=30.0
         )
+
+
+def test_attitude_quaternion_on_request_matches_the_euler_attitude():
+    rig = Rig()
+    assert (
+        rig.ack(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 31.0, 100_000.0)
+        == mavlink.MAV_RESULT_ACCEPTED
+    )
+
+    def setpoint():
+        rig.setpoint(VELOCITY, vx=0.0, vy=18.0)
+
+    rig.arm_offboard(setpoint)
+    rig.fly(3.0, setpoint)
+    euler = [m for _, m in rig.sent if m.get_type() == "ATTITUDE"][-1]
+    q = [m for _, m in rig.sent if m.get_type() == "ATTITUDE_QUATERNION"][-1]
+    assert q.time_boot_ms == euler.time_boot_ms
+    roll = math.atan2(2 * (q.q1 * q.q2 + q.q3 * q.q4), 1 - 2 * (q.q2**2 + q.q3**2))
+    yaw = math.atan2(2 * (q.q1 * q.q4 + q.q2 * q.q3), 1 - 2 * (q.q3**2 + q.q4**2))
+    assert roll == pytest.approx(euler.roll, abs=1e-6)
+    assert yaw == pytest.approx(euler.yaw, abs=1e-6)
+    assert abs(euler.roll) > 0.3  # turning at 0.2 rad/s and 18 m/s banks about 20 degrees
+
+
+def test_wind_drifts_the_ground_track_and_shows_in_ground_velocity():
+    rig = Rig()
+
+    def setpoint():
+        rig.setpoint(VELOCITY, vx=18.0, vy=0.0)
+
+    rig.arm_offboard(setpoint)
+    v = rig.vehicle
+    v.wind_east_m_s, v.wind_north_m_s = 5.0, 0.0
+    east0 = v.state.east_m
+    for _ in range(500):
+        setpoint()
+        rig.t += DT
+        rig.sent.extend(v.advance(DT, rig.t, rig.t, 5.0, 0.0))
+        rig.sent.extend(v.telemetry(rig.t, lambda: (47.0, 8.0, 500.0)))
+    assert v.state.east_m - east0 == pytest.approx(5.0 * 10.0, abs=0.1)  # 10 s of 5 m/s drift
+    position = [m for _, m in rig.sent if m.get_type() == "GLOBAL_POSITION_INT"][-1]
+    hud = [m for _, m in rig.sent if m.get_type() == "VFR_HUD"][-1]
+    assert (position.vx, position.vy) == (1800, 500)
+    assert hud.airspeed == pytest.approx(18.0)
+    assert hud.groundspeed == pytest.approx(math.hypot(18.0, 5.0))
