@@ -1,0 +1,303 @@
+"""The federated filter's main filter (Appendix A): fuse local estimates, share information back.
+
+Overall optimisation: P_g = (sum_i P_i^-1)^-1, X_g = P_g sum_i P_i^-1 X_i, after a time update of
+every local estimate to the fusion time. Information allocation: beta_i = ||P_i||_F^-1 /
+sum_j ||P_j||_F^-1 (the main filter keeps beta_m = 0), and each local filter is given
+P_i = beta_i^-1 P_g, X_i = X_g, Q_i = beta_i^-1 Q_g.
+
+How the allocation reaches an IMM is the design choice (``FeedbackMode``):
+
+- ``"none"``: no feedback; the local filters stay independent and the main filter only fuses.
+- ``"reset"``: Appendix A read literally: every model of the local IMM is set to (X_g,
+  beta_i^-1 P_g). It wipes out the differences between the model-conditioned estimates that the
+  IMM needs to tell the models apart, and measures worse than no feedback.
+- ``"mixture"``: the local IMM's whole mixture is moved by the affine map that takes its
+  combined moments (X_i, P_i) to (X_g, beta_i^-1 P_g): X_j <- X_g + T (X_j - X_i),
+  P_j <- T P_j T^T with T = chol(beta_i^-1 P_g) chol(P_i)^-1. The combined estimate is exactly
+  the allocated one; the mode probabilities and the models' relative offsets are kept.
+- ``"modewise"`` (default): Appendix A applied to each model of the IMM. The main filter fuses
+  the local filters model by model (P_gj = (sum_i P_ij^-1)^-1, X_gj = P_gj sum_i P_ij^-1 X_ij),
+  fuses the mode probabilities by the product rule (mu_g ~ prod_i mu_i / c^(n-1), c the
+  common predicted prior), and gives every local filter every model's share
+  (X_gj, beta_i^-1 P_gj) and mu_g. Local filters holding a share scale Q and the mixing spread
+  by beta_i^-1 and undo it in their mode likelihoods (``IMMState.cov_scale``), so that for
+  linear models the federated IMM reproduces the centralised IMM.
+
+In every mode with feedback the local filters run with Q_i = beta_i^-1 Q_g.
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.core.estimation.imm import IMMParams, IMMState, combine, imm_predict
+from app.core.estimation.linalg import robust_cholesky, symmetrise
+from app.core.estimation.local import LocalParams, LocalState
+from app.core.estimation.messages import GlobalEstimate, LocalEstimate
+from app.core.estimation.models import MotionModel
+
+FloatArray = NDArray[np.float64]
+
+FeedbackMode = Literal["none", "reset", "mixture", "modewise"]
+FEEDBACK_MODES: tuple[FeedbackMode, ...] = ("none", "reset", "mixture", "modewise")
+
+
+@dataclass(frozen=True, slots=True)
+class MainParams:
+    """The main filter.
+
+    Parameters
+    ----------
+    imm
+        The local filters' IMM parameters (the ``"modewise"`` fusion predicts each local
+        filter's models to the fusion time with them).
+    time_update
+        Model that carries each combined local estimate to the fusion time (eqs 18-19), in the
+        other modes.
+    max_age_s
+        Local estimates older than this at the fusion time are left out.
+    feedback
+        How the information allocation is applied to the local IMMs (module docstring).
+    scale_process_noise
+        Apply Q_i = beta_i^-1 Q_g in the local filters while feedback is on.
+    """
+
+    imm: IMMParams | None = None
+    time_update: MotionModel = field(default_factory=lambda: MotionModel("ca", 5e-4))
+    max_age_s: float = 2.0
+    feedback: FeedbackMode = "modewise"
+    scale_process_noise: bool = True
+
+    def __post_init__(self) -> None:
+        if self.feedback not in FEEDBACK_MODES:
+            raise ValueError(f"feedback must be one of {FEEDBACK_MODES}, got {self.feedback!r}")
+        if not (math.isfinite(self.max_age_s) and self.max_age_s > 0.0):
+            raise ValueError(f"max_age_s must be finite and > 0, got {self.max_age_s}")
+
+
+@dataclass(frozen=True, slots=True)
+class MainState:
+    """The newest estimate from every local filter, and what was refused."""
+
+    latest: tuple[LocalEstimate, ...] = ()
+    received: int = 0
+    out_of_order_dropped: int = 0
+    shared: GlobalEstimate | None = None
+    """The last allocation sent back (its mu is the common prior of the modewise fusion)."""
+
+    def estimate_of(self, sensor: str) -> LocalEstimate | None:
+        for est in self.latest:
+            if est.sensor == sensor:
+                return est
+        return None
+
+
+def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
+    """Keep ``estimate`` as its sender's newest; an older one than already held is counted and
+    dropped."""
+    held = state.estimate_of(estimate.sensor)
+    if held is not None and estimate.t_s < held.t_s:
+        return replace(state, out_of_order_dropped=state.out_of_order_dropped + 1)
+    others = tuple(e for e in state.latest if e.sensor != estimate.sensor)
+    return replace(state, latest=(*others, estimate), received=state.received + 1)
+
+
+def information_shares(covariances: FloatArray) -> FloatArray:
+    """beta_i = ||P_i||_F^-1 / sum_j ||P_j||_F^-1 (Appendix A), for a stack (k, 6, 6); sums to 1."""
+    norms = np.sqrt(np.sum(covariances * covariances, axis=(1, 2)))
+    inv_norms: FloatArray = 1.0 / norms
+    shares: FloatArray = inv_norms / np.sum(inv_norms)
+    return shares
+
+
+def time_update(
+    x: FloatArray, p: FloatArray, dt_s: float, model: MotionModel, q_scale: float = 1.0
+) -> tuple[FloatArray, FloatArray]:
+    """Carry one estimate (6,), (6, 6) over ``dt_s`` with ``model``: F x, F P F^T + s Q(|dt|)."""
+    if dt_s == 0.0:
+        return x, p
+    f = model.transition(dt_s)
+    p_new = f @ p @ f.T + q_scale * model.process_noise(dt_s)
+    return f @ x, 0.5 * (p_new + p_new.T)
+
+
+def fuse(
+    estimates: Sequence[LocalEstimate],
+    t_s: float,
+    params: MainParams,
+    shared: GlobalEstimate | None = None,
+) -> GlobalEstimate | None:
+    """Overall optimisation (Appendix A (3)) of the estimates no older than ``max_age_s``.
+
+    Each estimate is first carried to ``t_s`` (with the main filter's time-update model, or
+    model by model with the IMM in the ``"modewise"`` design). Returns None when no estimate
+    is fresh enough. ``shared`` is the last allocation (the common prior of the mode
+    probabilities).
+    """
+    fresh = [e for e in estimates if abs(t_s - e.t_s) <= params.max_age_s]
+    if not fresh:
+        return None
+    if params.feedback == "modewise":
+        if params.imm is None:
+            raise ValueError("the modewise fusion needs the local filters' IMM parameters (imm)")
+        if all(e.model_x is not None for e in fresh):
+            return _fuse_modewise(fresh, t_s, params.imm, shared)
+    k = len(fresh)
+    xs = np.empty((k, 6))
+    ps = np.empty((k, 6, 6))
+    for i, e in enumerate(fresh):
+        xs[i], ps[i] = time_update(e.x, e.p, t_s - e.t_s, params.time_update, e.q_scale)
+    x_g, p_g = _information_sum(xs, ps)
+    beta = information_shares(ps)
+    return GlobalEstimate(
+        t_s=float(t_s),
+        x=x_g,
+        p=p_g,
+        beta=tuple((e.sensor, float(b)) for e, b in zip(fresh, beta, strict=True)),
+    )
+
+
+def _information_sum(xs: FloatArray, ps: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """P_g = (sum P_i^-1)^-1, X_g = P_g sum P_i^-1 X_i over the first axis of (k, 6), (k, 6, 6)."""
+    infos = np.linalg.inv(ps)
+    info = infos.sum(axis=0)
+    p_g = np.linalg.inv(0.5 * (info + info.T))
+    p_g = 0.5 * (p_g + p_g.T)
+    x_g = p_g @ (infos @ xs[:, :, None]).sum(axis=0)[:, 0]
+    return x_g, p_g
+
+
+def _fuse_modewise(
+    fresh: Sequence[LocalEstimate],
+    t_s: float,
+    imm: IMMParams,
+    shared: GlobalEstimate | None,
+) -> GlobalEstimate:
+    states = []
+    for e in fresh:
+        if e.model_x is None or e.model_p is None:
+            raise ValueError(f"local estimate from {e.sensor!r} has no model-conditioned states")
+        state = IMMState(e.t_s, np.asarray(e.model_x), np.asarray(e.model_p), e.mu, e.q_scale)
+        states.append(imm_predict(state, t_s, imm) if e.t_s < t_s else state)
+    r = imm.n_models
+    model_x = np.empty((r, 6))
+    model_p = np.empty((r, 6, 6))
+    for j in range(r):
+        model_x[j], model_p[j] = _information_sum(
+            np.stack([s.x[j] for s in states]), np.stack([s.p[j] for s in states])
+        )
+    # product rule: each local mu_i ~ c * L_i from a common prior c
+    log_mu = np.sum([np.log(np.maximum(s.mu, 1e-300)) for s in states], axis=0)
+    if shared is not None and shared.mu is not None and len(states) > 1:
+        prior = shared.mu @ imm.transition_for(t_s - shared.t_s)
+        log_mu -= (len(states) - 1) * np.log(np.maximum(prior, 1e-300))
+    mu = np.exp(log_mu - np.max(log_mu))
+    mu = np.maximum(mu / mu.sum(), 1e-12)
+    mu /= mu.sum()
+    x_g, p_g = combine(model_x, model_p, mu)
+    combined_p = np.stack([s.combined()[1] for s in states])
+    beta = information_shares(combined_p)
+    return GlobalEstimate(
+        t_s=float(t_s),
+        x=x_g,
+        p=p_g,
+        beta=tuple((e.sensor, float(b)) for e, b in zip(fresh, beta, strict=True)),
+        mu=mu,
+        model_x=model_x,
+        model_p=model_p,
+    )
+
+
+def main_fuse(state: MainState, t_s: float, params: MainParams) -> GlobalEstimate | None:
+    """Fuse the main filter's newest local estimates at ``t_s``."""
+    return fuse(state.latest, t_s, params, state.shared)
+
+
+def main_allocate(state: MainState, fused: GlobalEstimate, params: MainParams) -> MainState:
+    """The main filter's copy of each local filter after the information allocation it sent:
+    (X_g, beta_i^-1 P_g) at the fused time, so that the next fusion counts the shared
+    information once. With feedback ``"none"`` the state is returned as is."""
+    if params.feedback == "none":
+        return state
+    shares = dict(fused.beta)
+    latest = []
+    for est in state.latest:
+        beta = shares.get(est.sensor)
+        if beta is None or beta <= 0.0 or est.t_s > fused.t_s:
+            latest.append(est)
+            continue
+        scale = 1.0 / beta if params.scale_process_noise else 1.0
+        if fused.model_x is not None and fused.model_p is not None and fused.mu is not None:
+            copy = LocalEstimate(
+                est.sensor,
+                fused.t_s,
+                fused.x,
+                fused.p / beta,
+                fused.mu,
+                scale,
+                model_x=fused.model_x,
+                model_p=fused.model_p / beta,
+            )
+        else:
+            copy = LocalEstimate(est.sensor, fused.t_s, fused.x, fused.p / beta, est.mu, scale)
+        latest.append(copy)
+    return replace(state, latest=tuple(latest), shared=fused)
+
+
+def apply_feedback(
+    local: LocalState,
+    fused: GlobalEstimate,
+    local_params: LocalParams,
+    main_params: MainParams,
+) -> LocalState:
+    """Information allocation (Appendix A (1)) to one local filter, per ``main_params.feedback``.
+
+    ``"modewise"``: the local filter takes the fused models' shares and mode probabilities
+    (carried forward with its IMM if it is already past the fused time). ``"reset"`` and
+    ``"mixture"``: the local filter is first brought to the fused time (an IMM prediction), or
+    the fused estimate is carried forward with the time-update model if the filter is past it.
+    A filter that was not part of the fusion (no share), or mode ``"none"``, is returned as is.
+    """
+    beta = fused.beta_for(local.sensor)
+    if main_params.feedback == "none" or beta is None or local.imm is None or beta <= 0.0:
+        return local
+    imm = local.imm
+    scale = 1.0 / beta if main_params.scale_process_noise else 1.0
+    r = imm.mu.shape[0]
+    if (
+        main_params.feedback == "modewise"
+        and fused.model_x is not None
+        and fused.model_p is not None
+        and fused.mu is not None
+    ):
+        new_imm = IMMState(
+            fused.t_s, np.array(fused.model_x), np.asarray(fused.model_p) / beta, fused.mu, scale
+        )
+        if imm.t_s > fused.t_s:
+            new_imm = imm_predict(new_imm, imm.t_s, local_params.imm)
+    else:
+        x_g, p_g = np.asarray(fused.x), np.asarray(fused.p)
+        if imm.t_s < fused.t_s:
+            imm = imm_predict(imm, fused.t_s, local_params.imm)
+        elif imm.t_s > fused.t_s:
+            x_g, p_g = time_update(
+                x_g, p_g, imm.t_s - fused.t_s, main_params.time_update, imm.cov_scale
+            )
+        target_p = p_g / beta
+        if main_params.feedback == "reset":
+            xs = np.tile(x_g, (r, 1))
+            ps = np.tile(target_p, (r, 1, 1))
+        else:
+            x_i, p_i = imm.combined()
+            l_target = robust_cholesky(target_p)
+            l_local = robust_cholesky(p_i)
+            t = np.linalg.solve(l_local.T, l_target.T).T  # T = L_t L_i^-1
+            xs = x_g + (imm.x - x_i) @ t.T
+            ps = symmetrise(t @ imm.p @ t.T)
+        new_imm = IMMState(imm.t_s, xs, ps, imm.mu, scale)
+    counters = replace(local.counters, feedback=local.counters.feedback + 1)
+    return replace(local, imm=new_imm, counters=counters)
