@@ -484,6 +484,8 @@ class SimVehicle:
             return self._enter(HOLD, t_s)
         if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
             return self._change_speed(p[1]), []
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._reposition(p, t_s)
         return mavlink.MAV_RESULT_UNSUPPORTED, []
 
     def _enter(self, mode: Px4Mode, t_s: float) -> tuple[int, list[Outgoing]]:
@@ -532,6 +534,24 @@ class SimVehicle:
         if mode is TAKEOFF and not self.armed:
             return mavlink.MAV_RESULT_DENIED, []
         return self._enter(mode, t_s)
+
+    def _reposition(self, p: tuple[float, ...], t_s: float) -> tuple[int, list[Outgoing]]:
+        """Hold (loiter) at a latitude/longitude, as PX4 does for MAV_CMD_DO_REPOSITION."""
+        lat, lon = p[4], p[5]
+        if not (self.in_air and math.isfinite(lat) and math.isfinite(lon)):
+            return mavlink.MAV_RESULT_DENIED, []
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return mavlink.MAV_RESULT_DENIED, []
+        if math.isfinite(p[0]) and p[0] > 0.0:
+            self._change_speed(p[0])
+        east, north, _ = self._geodesy.to_local(lat, lon, self._sim.origin_alt_m)
+        changed = self.mode is not HOLD
+        self.mode = HOLD
+        self._mode_entered_t_s = t_s
+        self.command = LoiterCommand(
+            east, north, self.loiter_radius_m, self.config.loiter_clockwise, self.cruise_speed_m_s
+        )
+        return mavlink.MAV_RESULT_ACCEPTED, [self._heartbeat()] if changed else []
 
     def _change_speed(self, speed_m_s: float) -> int:
         limits = self.config.limits

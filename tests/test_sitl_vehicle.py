@@ -435,3 +435,55 @@ def test_wind_drifts_the_ground_track_and_shows_in_ground_velocity():
     assert (position.vx, position.vy) == (1800, 500)
     assert hud.airspeed == pytest.approx(18.0)
     assert hud.groundspeed == pytest.approx(math.hypot(18.0, 5.0))
+
+
+def test_reposition_holds_at_a_geodetic_point():
+    rig = Rig()
+    lat, lon, _ = rig.geodesy.to_geodetic(500.0, 800.0, 0.0)
+    assert (
+        rig.send(
+            mavlink.MAVLink_command_int_message(
+                1,
+                1,
+                mavlink.MAV_FRAME_GLOBAL,
+                mavlink.MAV_CMD_DO_REPOSITION,
+                0,
+                0,
+                -1.0,
+                1.0,
+                0.0,
+                math.nan,
+                round(lat * 1e7),
+                round(lon * 1e7),
+                100.0,
+            )
+        )[0][1].result
+        == mavlink.MAV_RESULT_DENIED
+    )  # on the ground
+    rig.ack(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    replies = rig.send(
+        mavlink.MAVLink_command_int_message(
+            1,
+            1,
+            mavlink.MAV_FRAME_GLOBAL,
+            mavlink.MAV_CMD_DO_REPOSITION,
+            0,
+            0,
+            -1.0,
+            1.0,
+            0.0,
+            math.nan,
+            round(lat * 1e7),
+            round(lon * 1e7),
+            100.0,
+        )
+    )
+    assert replies[0][1].result == mavlink.MAV_RESULT_ACCEPTED
+    command = rig.vehicle.command
+    assert isinstance(command, LoiterCommand)
+    assert (command.center_east_m, command.center_north_m) == pytest.approx(
+        (500.0, 800.0), abs=0.05
+    )
+    rig.fly(240.0)
+    d = math.hypot(rig.vehicle.state.east_m - 500.0, rig.vehicle.state.north_m - 800.0)
+    assert d == pytest.approx(rig.vehicle.loiter_radius_m, abs=2.0)
