@@ -7,6 +7,7 @@ returns the streams that are due. The server (``sitl.server``) does the I/O.
 
 import logging
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
@@ -80,7 +81,22 @@ _CAPABILITIES: Final = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
 )
+
+# The PX4 parameters the simulator honours, in PARAM_REQUEST_LIST order
+PARAM_OFFBOARD_LOSS_TIMEOUT: Final = "COM_OF_LOSS_T"  # s, simulated
+PARAM_OFFBOARD_LOSS_ACTION: Final = "COM_OBL_RC_ACT"  # 3: return; anything else: hold
+PARAM_CRUISE_SPEED: Final = "FW_AIRSPD_TRIM"  # m/s
+PARAM_LOITER_RADIUS: Final = "NAV_LOITER_RAD"  # m
+_PARAM_TYPES: Final = {
+    PARAM_OFFBOARD_LOSS_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_OFFBOARD_LOSS_ACTION: mavlink.MAV_PARAM_TYPE_INT32,
+    PARAM_CRUISE_SPEED: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_LOITER_RADIUS: mavlink.MAV_PARAM_TYPE_REAL32,
+}
+_PX4_RETURN_ACTION: Final = 3
+_PX4_HOLD_ACTION: Final = 5
 
 # message id -> default interval in simulated seconds (None: telemetry_rate_hz); -1: off
 _HEARTBEAT_ID: Final = mavlink.MAVLINK_MSG_ID_HEARTBEAT
@@ -132,6 +148,12 @@ class LineCommand:
 
 
 Command = VelocityCommand | LoiterCommand | LineCommand
+
+
+def _param_name(param_id: str | bytes) -> str:
+    if isinstance(param_id, bytes):
+        param_id = param_id.decode("ascii", "replace")
+    return param_id.split("\x00", 1)[0]
 
 
 def _as_int(value: float, default: int = 0) -> int:
@@ -233,6 +255,10 @@ class SimVehicle:
         self.last_observation: Observation | None = None
         self.wind_east_m_s = 0.0
         self.wind_north_m_s = 0.0
+        # settable through PX4 parameters
+        self.offboard_timeout_s = sim.offboard_timeout_s
+        self.failsafe_action = sim.failsafe_action
+        self._loiter_radius_m = config.effective_loiter_radius_m
 
     # ---- truth -------------------------------------------------------------------------------
 
@@ -256,7 +282,7 @@ class SimVehicle:
 
     @property
     def loiter_radius_m(self) -> float:
-        return self.config.effective_loiter_radius_m
+        return self._loiter_radius_m
 
     # ---- flight ------------------------------------------------------------------------------
 
@@ -266,7 +292,7 @@ class SimVehicle:
         """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s``."""
         out: list[Outgoing] = []
         if self.mode is OFFBOARD and self._offboard_lost(t_s, wall_s):
-            action = RETURN if self._sim.failsafe_action == "return" else HOLD
+            action = RETURN if self.failsafe_action == "return" else HOLD
             self._set_mode(action, t_s)
             text = f"Failsafe: offboard lost, switching to {action.name}"
             log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
@@ -297,7 +323,7 @@ class SimVehicle:
 
     def _offboard_lost(self, t_s: float, wall_s: float) -> bool:
         return (
-            t_s - self._last_setpoint_t_s > self._sim.offboard_timeout_s
+            t_s - self._last_setpoint_t_s > self.offboard_timeout_s
             and wall_s - self._last_setpoint_wall_s > self._sim.offboard_timeout_min_wall_s
         )
 
@@ -376,6 +402,23 @@ class SimVehicle:
                 msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent()
             )
             return [(AUTOPILOT_COMPONENT, reply)]
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
+            if msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            names = list(_PARAM_TYPES)
+            index = msg.param_index
+            name = names[index] if 0 <= index < len(names) else _param_name(msg.param_id)
+            return [self._param_value(name)] if name in _PARAM_TYPES else []
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
+            if msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            return [self._param_value(name) for name in _PARAM_TYPES]
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_SET:
+            name = _param_name(msg.param_id)
+            if name not in _PARAM_TYPES or msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            self._set_param(name, msg.param_value)
+            return [self._param_value(name)]  # the value now in force (unchanged if refused)
         if msg_id == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0:
             return [
                 (AUTOPILOT_COMPONENT, mavlink.MAVLink_timesync_message(round(t_s * 1e9), msg.ts1))
@@ -552,6 +595,40 @@ class SimVehicle:
             east, north, self.loiter_radius_m, self.config.loiter_clockwise, self.cruise_speed_m_s
         )
         return mavlink.MAV_RESULT_ACCEPTED, [self._heartbeat()] if changed else []
+
+    def _param(self, name: str) -> float:
+        if name == PARAM_OFFBOARD_LOSS_TIMEOUT:
+            return self.offboard_timeout_s
+        if name == PARAM_OFFBOARD_LOSS_ACTION:
+            return _PX4_RETURN_ACTION if self.failsafe_action == "return" else _PX4_HOLD_ACTION
+        if name == PARAM_CRUISE_SPEED:
+            return self.cruise_speed_m_s
+        return self._loiter_radius_m
+
+    def _set_param(self, name: str, wire_value: float) -> None:
+        """Apply a PARAM_SET; a value out of range is refused (the old value stays)."""
+        if _PARAM_TYPES[name] == mavlink.MAV_PARAM_TYPE_INT32:
+            action = struct.unpack("<i", struct.pack("<f", wire_value))[0]  # bytewise encoding
+            self.failsafe_action = "return" if action == _PX4_RETURN_ACTION else "hold"
+            return
+        if not math.isfinite(wire_value):
+            return
+        if name == PARAM_OFFBOARD_LOSS_TIMEOUT and wire_value > 0.0:
+            self.offboard_timeout_s = wire_value
+        elif name == PARAM_CRUISE_SPEED and wire_value > 0.0:
+            self._change_speed(wire_value)
+        elif name == PARAM_LOITER_RADIUS and wire_value >= 1.05 * self.config.min_turn_radius_m:
+            self._loiter_radius_m = wire_value
+
+    def _param_value(self, name: str) -> Outgoing:
+        names = list(_PARAM_TYPES)
+        kind = _PARAM_TYPES[name]
+        value = self._param(name)
+        if kind == mavlink.MAV_PARAM_TYPE_INT32:
+            value = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+        return AUTOPILOT_COMPONENT, mavlink.MAVLink_param_value_message(
+            name.encode("ascii"), value, kind, len(names), names.index(name)
+        )
 
     def _change_speed(self, speed_m_s: float) -> int:
         limits = self.config.limits

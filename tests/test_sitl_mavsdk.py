@@ -10,6 +10,7 @@ from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, VelocityNedYaw
+from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
 from sitl.fixedwing import wrap_pi
@@ -110,3 +111,26 @@ async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
                     )
                     assert math.hypot(east, north) < 20.0
                     break
+
+
+async def test_mavsdk_reads_and_sets_the_px4_failsafe_parameters():
+    config = sim_config(1, speedup=10.0)
+    async with running_sim(config) as sim:
+        gcs = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        async with Mavsdk(gcs) as mavsdk:
+            await mavsdk.add_any_connection(sim.endpoints[0].mavsdk_url)
+            system = await mavsdk.first_autopilot(timeout_s=5.0)
+            assert system is not None
+            params = ParamAsync(system)
+            assert await params.get_param_int("COM_OBL_RC_ACT") == 5  # hold
+            assert await params.get_param_float("COM_OF_LOSS_T") == pytest.approx(1.0)
+            await params.set_param_int("COM_OBL_RC_ACT", 3)  # return
+            await params.set_param_float("COM_OF_LOSS_T", 2.5)
+            assert await params.get_param_int("COM_OBL_RC_ACT") == 3
+            vehicle = sim.vehicles[0]
+            assert (vehicle.failsafe_action, vehicle.offboard_timeout_s) == ("return", 2.5)
+            everything = await params.get_all_params()
+            names = {p.name for p in everything.int_params} | {
+                p.name for p in everything.float_params
+            }
+            assert names == {"COM_OBL_RC_ACT", "COM_OF_LOSS_T", "FW_AIRSPD_TRIM", "NAV_LOITER_RAD"}

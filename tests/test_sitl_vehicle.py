@@ -2,6 +2,7 @@
 setpoints, failsafe, telemetry consistency."""
 
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -487,3 +488,34 @@ def test_reposition_holds_at_a_geodetic_point():
     rig.fly(240.0)
     d = math.hypot(rig.vehicle.state.east_m - 500.0, rig.vehicle.state.north_m - 800.0)
     assert d == pytest.approx(rig.vehicle.loiter_radius_m, abs=2.0)
+
+
+def test_px4_parameters_set_the_failsafe_cruise_speed_and_loiter_radius():
+    rig = Rig()
+
+    def param_set(name, value):
+        ((_, reply),) = rig.send(mavlink.MAVLink_param_set_message(1, 1, name.encode(), value, 0))
+        assert reply.get_type() == "PARAM_VALUE"
+        assert reply.param_id == name
+        return reply.param_value
+
+    def as_int32(value):
+        return struct.unpack("<f", struct.pack("<i", value))[0]
+
+    listed = rig.send(mavlink.MAVLink_param_request_list_message(1, 1))
+    assert [m.param_id for _, m in listed] == [
+        "COM_OF_LOSS_T",
+        "COM_OBL_RC_ACT",
+        "FW_AIRSPD_TRIM",
+        "NAV_LOITER_RAD",
+    ]
+    assert param_set("COM_OBL_RC_ACT", as_int32(3)) == as_int32(3)
+    assert rig.vehicle.failsafe_action == "return"
+    assert param_set("COM_OF_LOSS_T", 3.0) == 3.0
+    assert param_set("COM_OF_LOSS_T", -1.0) == 3.0  # refused, unchanged
+    assert param_set("NAV_LOITER_RAD", 50.0) == pytest.approx(135.0)  # tighter than it can turn
+    assert param_set("NAV_LOITER_RAD", 200.0) == 200.0
+    assert param_set("FW_AIRSPD_TRIM", 99.0) == 24.0  # clamped to the speed limit
+    assert rig.send(mavlink.MAVLink_param_set_message(1, 1, b"NO_SUCH", 1.0, 9)) == []
+    ((_, read),) = rig.send(mavlink.MAVLink_param_request_read_message(1, 1, b"", 1))
+    assert read.param_id == "COM_OBL_RC_ACT"
