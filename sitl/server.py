@@ -367,7 +367,6 @@ class SimulatorServer:
         observed: list[tuple[SimVehicle, Observation]] = []
         target: TargetState | None = None
         for vehicle in self.vehicles:
-            vehicle.wind_east_m_s, vehicle.wind_north_m_s = wind_e, wind_n
             outs.append(vehicle.advance(dt, t, wall_s, wind_e, wind_n))
             if vehicle.camera_due(t):
                 if target is None:

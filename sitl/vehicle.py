@@ -289,8 +289,9 @@ class SimVehicle:
     def advance(
         self, dt_s: float, t_s: float, wall_s: float, wind_east_m_s: float, wind_north_m_s: float
     ) -> list[Outgoing]:
-        """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s``."""
+        """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s`` in the wind."""
         out: list[Outgoing] = []
+        self.wind_east_m_s, self.wind_north_m_s = wind_east_m_s, wind_north_m_s
         if self.mode is OFFBOARD and self._offboard_lost(t_s, wall_s):
             action = RETURN if self.failsafe_action == "return" else HOLD
             self._set_mode(action, t_s)

@@ -8,7 +8,7 @@ import sys
 from typing import TextIO
 
 from app.config import load_config
-from app.errors import ConfigError
+from app.errors import ConfigError, LinkError
 from app.sitl_config import SitlScenario
 from sitl.config import SimConfig
 from sitl.server import SimulatorServer
@@ -38,6 +38,14 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
     )
     parser.add_argument("--seed", type=int, metavar="S", help="random seed (camera noise, wind)")
     parser.add_argument(
+        "--gcs-host", metavar="HOST", help="where the vehicles send (default 127.0.0.1)"
+    )
+    parser.add_argument(
+        "--bind-host",
+        metavar="HOST",
+        help="address the vehicle sockets bind (default 127.0.0.1; 0.0.0.0 for other machines)",
+    )
+    parser.add_argument(
         "--duration",
         type=float,
         metavar="T",
@@ -57,7 +65,14 @@ def build_sim_config(args: argparse.Namespace) -> SimConfig:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.duration is not None and not args.duration > 0.0:
         raise ConfigError(f"--duration must be > 0, got {args.duration}")
-    return scenario.build(
+    network = scenario.network.model_copy(
+        update={
+            key: value
+            for key, value in (("gcs_host", args.gcs_host), ("bind_host", args.bind_host))
+            if value is not None
+        }
+    )
+    return scenario.model_copy(update={"network": network}).build(
         count=args.vehicles, base_port=args.base_port, speedup=args.speedup, seed=args.seed
     )
 
@@ -91,6 +106,8 @@ async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int
                 file=out,
                 flush=True,
             )
+    except OSError as exc:  # a vehicle socket that cannot be bound (port taken, bad host)
+        raise LinkError(f"cannot open the vehicle sockets: {exc}") from exc
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
