@@ -210,11 +210,12 @@ def imm_update(predicted: IMMState, z: FloatArray, r: FloatArray) -> IMMUpdate:
 
 
 def default_imm_params(
-    q_cv: float = 0.01,
-    q_ca: float = 0.05,
-    q_turn: float = 0.05,
-    turn_rate_rad_s: float = 0.05,
+    q_cv: float = 1e-4,
+    q_ca: float = 5e-4,
+    q_turn: float = 0.3,
+    turn_rate_rad_s: float = 0.02,
     transition: Sequence[Sequence[float]] | None = None,
+    transition_dt_s: float = 0.1,
 ) -> IMMParams:
     """A three-model IMM (CV, CA, turn); the defaults are configs/estimator.toml's."""
     models = (
@@ -225,9 +226,9 @@ def default_imm_params(
     m = (
         np.array(transition, dtype=np.float64)
         if transition is not None
-        else np.array([[0.98, 0.01, 0.01], [0.02, 0.96, 0.02], [0.02, 0.02, 0.96]])
+        else np.array([[0.999, 0.0005, 0.0005], [0.002, 0.996, 0.002], [0.002, 0.002, 0.996]])
     )
-    return IMMParams(models=models, transition=m)
+    return IMMParams(models=models, transition=m, transition_dt_s=transition_dt_s)
 
 
 __all__ = [
