@@ -246,6 +246,11 @@ class SimulatorServer:
         )
 
     @property
+    def geodesy(self) -> Geodesy:
+        """Local east/north/up about the simulator's origin <-> latitude/longitude."""
+        return self._geodesy
+
+    @property
     def stats(self) -> tuple[LinkStats, ...]:
         return tuple(link.stats for link in self._links)
 

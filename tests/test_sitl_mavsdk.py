@@ -97,6 +97,15 @@ async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
                 assert math.hypot(velocity.north_m_s, velocity.east_m_s) == pytest.approx(
                     20.0, abs=0.2
                 )
+                assert await telemetry[sysid].health_all_ok()
+                position = await telemetry[sysid].position()
+                assert position.relative_altitude_m == pytest.approx(100.0, abs=0.01)
+                now = sim.truth().vehicles[sysid - 1].state
+                east, north, _ = sim.geodesy.to_local(
+                    position.latitude_deg, position.longitude_deg, position.absolute_altitude_m
+                )
+                # the latest telemetry is at most a couple of 0.1 s periods (2 m each) old
+                assert math.hypot(east - now.east_m, north - now.north_m) < 10.0
 
             # the camera component's CAMERA_TRACKING_GEO_STATUS reaches MAVSDK
             direct = MavlinkDirectAsync(systems[1])
@@ -106,7 +115,7 @@ async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
                     assert message.component_id == 100
                     fields = json.loads(message.fields_json)
                     # the stationary target stands at the origin; 10 m^2 noise: within 20 m
-                    east, north, _ = sim._geodesy.to_local(
+                    east, north, _ = sim.geodesy.to_local(
                         fields["lat"] / 1e7, fields["lon"] / 1e7, config.origin_alt_m
                     )
                     assert math.hypot(east, north) < 20.0

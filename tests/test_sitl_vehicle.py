@@ -87,8 +87,9 @@ class Rig:
         )
 
     def fly(self, seconds, setpoint=None, check=None):
-        for _ in range(round(seconds / DT)):
-            if setpoint is not None:
+        """Fly ``seconds``, resending ``setpoint`` at 10 Hz (every 5th step)."""
+        for k in range(round(seconds / DT)):
+            if setpoint is not None and k % 5 == 0:
                 setpoint()
             before = self.vehicle.state
             self.t += DT
@@ -236,6 +237,7 @@ def test_failsafe_when_setpoints_stop(action, mode):
 
     rig.arm_offboard(setpoint)
     rig.fly(5.0, setpoint)
+    setpoint()  # the last one
     t_last = rig.t
     rig.sent.clear()
     rig.fly(0.98)
