@@ -100,12 +100,12 @@ async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
                 assert await telemetry[sysid].health_all_ok()
                 position = await telemetry[sysid].position()
                 assert position.relative_altitude_m == pytest.approx(100.0, abs=0.01)
-                now = sim.truth().vehicles[sysid - 1].state
+                truth_now = sim.truth().vehicles[sysid - 1].state
                 east, north, _ = sim.geodesy.to_local(
                     position.latitude_deg, position.longitude_deg, position.absolute_altitude_m
                 )
                 # the latest telemetry is at most a couple of 0.1 s periods (2 m each) old
-                assert math.hypot(east - now.east_m, north - now.north_m) < 10.0
+                assert math.hypot(east - truth_now.east_m, north - truth_now.north_m) < 10.0
 
             # the camera component's CAMERA_TRACKING_GEO_STATUS reaches MAVSDK
             direct = MavlinkDirectAsync(systems[1])
