@@ -471,4 +471,5 @@ def _ground_course(
         return rel_course, 0.0, env.min_speed_m_s
     course = math.atan2(gx, gy)
     rate = (gy * ax - gx * ay) / g2
-    return course, rate, math.sqrt(g2)
+    # (clamped again only against rounding: _moving_target_velocity already scaled it in)
+    return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), env.max_speed_m_s)

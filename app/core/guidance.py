@@ -524,8 +524,8 @@ def moving_target_velocity(
     ``rel_dir`` is the field's unit direction in the target's frame. lambda >= 0 is chosen so the
     ground speed |v_g| equals ``speed_m_s`` clamped to [min, max]:
     lambda = -(v_t . d) + sqrt((v_t . d)^2 - |v_t|^2 + s^2). When the target is too fast for that
-    (no real root), lambda = max(0, -(v_t . d)) gives the closest achievable ground speed, and
-    the ground speed is clamped into the limits along v_g's direction.
+    (no real root, or a negative one), the lambda >= 0 that comes closest is used, and the ground
+    speed is clamped into the limits along v_g's direction.
 
     Returns
     -------
@@ -558,7 +558,9 @@ def _moving_target_velocity(
     s = min(max(s, s_min), s_max)
     along = tx * dx + ty * dy
     disc = along * along - (tx * tx + ty * ty) + s * s
-    lam = -along + math.sqrt(disc) if disc >= 0.0 else max(0.0, -along)
+    # the larger root; if even that is negative (a target faster than s, moving along d) or
+    # there is none, the lambda >= 0 closest to ground speed s
+    lam = max(0.0, -along + math.sqrt(disc)) if disc >= 0.0 else max(0.0, -along)
     gx, gy = tx + lam * dx, ty + lam * dy
     g = math.hypot(gx, gy)
     if g > s_max or (0.0 < g < s_min):

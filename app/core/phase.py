@@ -7,6 +7,9 @@ multiplied by ``orbit_sign`` (+1 counter-clockwise, -1 clockwise), so a phase al
 direction of flight. Plain floats and ``math``: these run every control tick.
 """
 
+import bisect
+import functools
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -175,25 +178,71 @@ def arrival_phase_lead(r_m: float, radius_m: float, c: float) -> float:
     Along eq. (4), theta_dot - s / r_d over r_dot is g(r) = (sqrt(D) / r_d - c r_d) / (r^2 - r_d^2),
     finite at r_d (-> c / (2 r_d)), so the lead is  Phi(r) = -integral_{r_d}^{r} g(r') dr'
     (negative outside the circle: the vehicle arrives behind where its polar angle suggests).
-    Speed cancels. Integrated with 24-point Gauss-Legendre. Steering phase on theta + Phi(r)
-    instead of theta lets a team space itself while still gathering.
+    Speed cancels. Steering phase on theta + Phi(r) instead of theta lets a team space itself
+    while still gathering.
+
+    Phi is tabulated once per (r_d, c) on a geometric grid in |r - r_d| (Gauss-Legendre on each
+    cell, memoised: a pure function of its arguments) and interpolated; within 0.1 % of r_d the
+    two-term expansion -(c d / (2 r_d) + d^2 / (2 c r_d^2)), d = r - r_d, is used. Beyond the
+    table (r > 1000 r_d) g is 1 / r_d to within 1e-6.
     """
     if not (math.isfinite(r_m) and r_m >= 0.0):
         raise ValueError(f"r_m must be finite and >= 0, got {r_m!r}")
+    if not (math.isfinite(radius_m) and radius_m > 0.0 and math.isfinite(c) and c > 0.0):
+        raise ValueError(f"radius_m and c must be finite and > 0, got {radius_m!r}, {c!r}")
     rd = radius_m
-    half = 0.5 * (r_m - rd)
-    if abs(half) < 1e-9 * rd:
-        return 0.0
-    mid = 0.5 * (r_m + rd)
-    rd2 = rd * rd
+    delta = r_m - rd
+    if abs(delta) < 1e-3 * rd:
+        # near the circle g(r_d + delta) = c / (2 r_d) + delta / (c r_d^2) + O(delta^2)
+        return -(c * delta / (2.0 * rd) + delta * delta / (2.0 * c * rd * rd))
+    q = abs(delta) / rd
+    inside = delta < 0.0
+    grid, outside_values, inside_values = _lead_table(rd, c)
+    values = inside_values if inside else outside_values
+    if q >= grid[-1]:
+        # only outside: far away g = 1 / r_d
+        return values[-1] - (q - grid[-1])
+    k = bisect.bisect_right(grid, q) - 1
+    w = (q - grid[k]) / (grid[k + 1] - grid[k])
+    return values[k] + w * (values[k + 1] - values[k])
+
+
+def _lead_integrand(x: float, rd: float, c: float) -> float:
+    x2, rd2 = x * x, rd * rd
+    diff = x2 - rd2
+    return (math.sqrt(diff * diff + c * c * x2 * rd2) / rd - c * rd) / diff
+
+
+def _gauss_legendre(a: float, b: float, rd: float, c: float) -> float:
+    half, mid = 0.5 * (b - a), 0.5 * (b + a)
     total = 0.0
     for node, weight in zip(_GL_NODES, _GL_WEIGHTS, strict=True):
-        x = mid + half * node
-        x2 = x * x
-        diff = x2 - rd2
-        root_d = math.sqrt(diff * diff + c * c * x2 * rd2)
-        total += weight * (root_d / rd - c * rd) / diff
-    return -total * half
+        total += weight * _lead_integrand(mid + half * node, rd, c)
+    return total * half
+
+
+@functools.lru_cache(maxsize=256)
+def _lead_table(
+    rd: float, c: float
+) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    """Grid of q = |r - r_d| / r_d (1e-3 .. 1000, ratio 1.15; inside only up to 1) and Phi at
+    r_d (1 + q) and r_d (1 - q)."""
+    grid = [1e-3]
+    while grid[-1] < 1000.0:
+        grid.append(grid[-1] * 1.15)
+    q0 = grid[0]
+    start_out = -(c * q0 * rd / (2.0 * rd) + (q0 * rd) ** 2 / (2.0 * c * rd * rd))
+    start_in = -(-c * q0 * rd / (2.0 * rd) + (q0 * rd) ** 2 / (2.0 * c * rd * rd))
+    outside = [start_out]
+    inside = [start_in]
+    for lo, hi in itertools.pairwise(grid):
+        outside.append(outside[-1] - _gauss_legendre(rd * (1 + lo), rd * (1 + hi), rd, c))
+        if hi <= 1.0:
+            # Phi(r) = -integral_{r_d}^{r} g: going inward the integral runs backwards
+            inside.append(inside[-1] + _gauss_legendre(rd * (1 - hi), rd * (1 - lo), rd, c))
+        else:
+            inside.append(inside[-1])
+    return tuple(grid), tuple(outside), tuple(inside)
 
 
 # --------------------------------------------------------------------------------------------

@@ -31,10 +31,11 @@ def plot_standoff(results: Mapping[str, SimulationResult], path: str | Path, tit
     law (vehicle 0 of each result). Returns the written path."""
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2), constrained_layout=True)
     ax_xy, ax_err, ax_rate = axes
-    first = next(iter(results.values()))
+    first_label, first = next(iter(results.items()))
     _circle(ax_xy, first)
     for (label, res), colour in zip(results.items(), _COLOURS, strict=False):
-        ax_xy.plot(res.east_m[:, 0], res.north_m[:, 0], color=colour, lw=1.4, label=label)
+        z = 3 if label == first_label else 2
+        ax_xy.plot(res.east_m[:, 0], res.north_m[:, 0], color=colour, lw=1.4, label=label, zorder=z)
         ax_xy.plot(res.east_m[0, 0], res.north_m[0, 0], "o", color=colour, ms=4)
         ax_err.plot(res.t_s, res.distance_error_m()[:, 0], color=colour, lw=1.3, label=label)
         ax_rate.plot(res.t_s, res.course_rate_rad_s[:, 0], color=colour, lw=1.1, label=label)

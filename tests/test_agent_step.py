@@ -1,0 +1,150 @@
+"""agent_step: one vehicle's pure decision step."""
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app.core.agent import (
+    AgentInputs,
+    AgentParams,
+    AgentState,
+    GuidanceParams,
+    OwnTelemetry,
+    PhaseParams,
+    TargetInfo,
+    VehicleEnvelope,
+    agent_step,
+)
+from app.core.guidance import optimal_c
+
+ENV = VehicleEnvelope(20.0, 13.0, 25.0, 2.0, 0.2, 1.0)
+PARAMS = AgentParams(0, ENV, GuidanceParams(300.0))
+ORIGIN = TargetInfo(0.0, 0.0)
+
+
+def _inputs(e, n, course, speed, t=0.0, target=ORIGIN, team=()):
+    return AgentInputs(t, OwnTelemetry(e, n, course, speed), target, team)
+
+
+def test_on_the_circle_it_commands_the_tangent_and_cruise():
+    # east of the target, counter-clockwise: tangent is due north
+    state, cmd, events = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0), PARAMS)
+    assert cmd.field_course_rad == pytest.approx(0.0, abs=1e-12)
+    assert cmd.speed_m_s == 20.0
+    # the lead is the orbit's own turn rate / k: s / r_d anticlockwise = -0.0667 rad of course
+    assert cmd.course_rad == pytest.approx(-20.0 / 300.0, rel=1e-6)
+    assert cmd.c == pytest.approx(optimal_c(300.0, 20.0, 0.2), abs=1e-3)
+    assert not cmd.inverse
+    assert events == ()
+    assert state.c == cmd.c
+
+
+def test_clockwise_orbit_goes_the_other_way():
+    params = AgentParams(0, ENV, GuidanceParams(300.0, orbit="cw"))
+    _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, math.pi, 20.0), params)
+    assert abs(cmd.field_course_rad) == pytest.approx(math.pi)
+
+
+def test_the_step_is_pure_and_deterministic():
+    state = AgentState()
+    inputs = _inputs(300.0, 300.0, math.pi, 18.0)
+    first = agent_step(state, inputs, PARAMS)
+    second = agent_step(state, inputs, PARAMS)
+    assert first == second
+    assert state == AgentState()  # the input state is untouched
+
+
+def test_simulation_b_start_switches_to_the_inverse_field_with_an_event():
+    state, cmd, events = agent_step(AgentState(), _inputs(300.0, 300.0, math.pi, 18.0), PARAMS)
+    assert cmd.inverse
+    assert state.mode == "inverse"
+    assert [e.kind for e in events] == ["inverse-field-on"]
+    # the next check waits for the period, so the next tick keeps the mode without events
+    _, cmd2, events2 = agent_step(state, _inputs(300.0, 299.8, math.pi, 18.0, t=0.01), PARAMS)
+    assert cmd2.inverse
+    assert events2 == ()
+
+
+def test_frew_and_fixed_laws_never_use_the_inverse_field():
+    for guidance in (GuidanceParams(300.0, law="frew"), GuidanceParams(300.0, law="fixed", c=0.5)):
+        params = AgentParams(0, ENV, guidance)
+        _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 300.0, math.pi, 18.0), params)
+        assert not cmd.inverse
+        assert cmd.c == (2.0 if guidance.law == "frew" else 0.5)
+
+
+@pytest.mark.parametrize(
+    ("field", "inputs"),
+    [
+        ("own.east_m", _inputs(math.nan, 0.0, 0.0, 20.0)),
+        ("own.course_rad", _inputs(300.0, 0.0, math.inf, 20.0)),
+        ("target.v_east_m_s", _inputs(300.0, 0.0, 0.0, 20.0, target=TargetInfo(0, 0, math.nan))),
+        ("team_positions", _inputs(300.0, 0.0, 0.0, 20.0, team=((1.0, math.nan), (0.0, 0.0)))),
+    ],
+)
+def test_non_finite_inputs_are_rejected_by_name(field, inputs):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.").replace("[", r"\[")):
+        agent_step(AgentState(), inputs, PARAMS)
+
+
+def test_bad_params_are_rejected():
+    with pytest.raises(ValueError, match="needs c"):
+        GuidanceParams(300.0, law="fixed")
+    with pytest.raises(ValueError, match="cruise"):
+        VehicleEnvelope(30.0, 13.0, 25.0, 2.0, 0.2)
+    with pytest.raises(ValueError, match="radius_m"):
+        GuidanceParams(-1.0)
+
+
+coords = st.floats(min_value=-3000.0, max_value=3000.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    coords,
+    coords,
+    st.floats(min_value=-math.pi, max_value=math.pi),
+    st.floats(min_value=0.0, max_value=30.0),
+    st.floats(min_value=-15.0, max_value=15.0),
+    st.floats(min_value=-15.0, max_value=15.0),
+    st.sampled_from(["proposed", "frew"]),
+    st.sampled_from(["paper", "frew"]),
+)
+def test_commands_are_finite_and_within_the_envelope(e, n, course, speed, tve, tvn, law, plaw):
+    params = AgentParams(
+        1, ENV, GuidanceParams(300.0, law=law), PhaseParams(law=plaw, gain_per_s=0.3)
+    )
+    team = ((400.0, 0.0), (e, n), (-200.0, 100.0))
+    inputs = _inputs(e, n, course, speed, target=TargetInfo(10.0, -5.0, tve, tvn), team=team)
+    _, cmd, _ = agent_step(AgentState(), inputs, params)
+    assert math.isfinite(cmd.course_rad)
+    assert math.isfinite(cmd.course_rate_ff_rad_s)
+    assert 13.0 <= cmd.speed_m_s <= 25.0
+    implied = abs(math.remainder(cmd.course_rad - course, 2.0 * math.pi))
+    assert implied * ENV.course_gain_per_s <= ENV.max_course_rate_rad_s + 1e-9
+
+
+def test_phase_keeping_speeds_up_the_vehicle_behind_its_seat():
+    params = [
+        AgentParams(i, ENV, GuidanceParams(400.0), PhaseParams("paper", 0.05)) for i in range(3)
+    ]
+    # on the circle at 0, 30 and 50 deg: vehicle 2 must move up, vehicle 0 drop back
+    pos = [(400 * math.cos(math.radians(a)), 400 * math.sin(math.radians(a))) for a in (0, 30, 50)]
+    team = tuple(pos)
+    speeds = []
+    for i, (e, n) in enumerate(pos):
+        course = -math.atan2(n, e)
+        _, cmd, _ = agent_step(AgentState(), _inputs(e, n, course, 20.0, team=team), params[i])
+        speeds.append(cmd.speed_m_s)
+    assert speeds[0] < 20.0 < speeds[2]
+    assert speeds[1] == pytest.approx(20.0 - 0.05 * math.radians(3.333) * 400.0, abs=0.01)
+
+
+def test_moving_target_ground_velocity_keeps_the_relative_velocity_on_the_field():
+    target = TargetInfo(0.0, 0.0, 5.0, 0.0)
+    _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), PARAMS)
+    # relative velocity must be due north (the tangent): v_g = (5, sqrt(400 - 25))
+    assert cmd.speed_m_s == pytest.approx(20.0)
+    assert cmd.field_course_rad == pytest.approx(math.atan2(5.0, math.sqrt(375.0)))
