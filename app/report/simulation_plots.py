@@ -28,17 +28,23 @@ def _circle(ax: Any, result: SimulationResult) -> None:
 
 def plot_standoff(results: Mapping[str, SimulationResult], path: str | Path, title: str) -> Path:
     """Figs 10/11: (a) trajectories, (b) distance error r - r_d, (c) course rate, one line per
-    law (vehicle 0 of each result). Returns the written path."""
+    law and vehicle; the first result is drawn on top. Returns the written path."""
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2), constrained_layout=True)
     ax_xy, ax_err, ax_rate = axes
     first_label, first = next(iter(results.items()))
     _circle(ax_xy, first)
-    for (label, res), colour in zip(results.items(), _COLOURS, strict=False):
-        z = 3 if label == first_label else 2
-        ax_xy.plot(res.east_m[:, 0], res.north_m[:, 0], color=colour, lw=1.4, label=label, zorder=z)
-        ax_xy.plot(res.east_m[0, 0], res.north_m[0, 0], "o", color=colour, ms=4)
-        ax_err.plot(res.t_s, res.distance_error_m()[:, 0], color=colour, lw=1.3, label=label)
-        ax_rate.plot(res.t_s, res.course_rate_rad_s[:, 0], color=colour, lw=1.1, label=label)
+    lines = [
+        (label if res.n_vehicles == 1 else f"{label} UAV{i + 1}", res, i, label == first_label)
+        for label, res in results.items()
+        for i in range(res.n_vehicles)
+    ]
+    for k, (label, res, i, primary) in enumerate(lines):
+        colour = _COLOURS[k % len(_COLOURS)]
+        z = 3 if primary else 2
+        ax_xy.plot(res.east_m[:, i], res.north_m[:, i], color=colour, lw=1.4, label=label, zorder=z)
+        ax_xy.plot(res.east_m[0, i], res.north_m[0, i], "o", color=colour, ms=4)
+        ax_err.plot(res.t_s, res.distance_error_m()[:, i], color=colour, lw=1.3, label=label)
+        ax_rate.plot(res.t_s, res.course_rate_rad_s[:, i], color=colour, lw=1.1, label=label)
     ax_xy.set_aspect("equal", adjustable="datalim")
     ax_xy.set(xlabel="east (m)", ylabel="north (m)", title="(a) trajectories")
     ax_xy.legend(loc="best", fontsize=8)
