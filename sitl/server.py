@@ -169,6 +169,7 @@ class SimulatorServer:
         self._stack: contextlib.AsyncExitStack | None = None
         self._stopping = False
         self.lag_events = 0
+        self.step_errors = 0
         self.observations: deque[tuple[int, Observation]] = deque(maxlen=OBSERVATION_LOG_LENGTH)
 
     def _make_link(self, index: int) -> _Link:
@@ -372,7 +373,14 @@ class SimulatorServer:
         observed: list[tuple[SimVehicle, Observation]] = []
         target: TargetState | None = None
         for vehicle in self.vehicles:
-            outs.append(vehicle.advance(dt, t, wall_s, wind_e, wind_n))
+            try:
+                outs.append(vehicle.advance(dt, t, wall_s, wind_e, wind_n))
+            except Exception:  # a bug must not stop the other vehicles or the server
+                self.step_errors += 1
+                if self.step_errors <= 10:
+                    log.exception("vehicle %d: physics step failed", vehicle.system_id)
+                outs.append([])
+                continue
             if vehicle.camera_due(t):
                 if target is None:
                     target = self.config.target.state_at(t)
