@@ -142,9 +142,13 @@ def test_phase_keeping_speeds_up_the_vehicle_behind_its_seat():
     assert speeds[1] == pytest.approx(20.0 - 0.05 * math.radians(3.333) * 400.0, abs=0.01)
 
 
-def test_moving_target_ground_velocity_keeps_the_relative_velocity_on_the_field():
+def test_moving_target_speed_is_relative_to_the_target():
     target = TargetInfo(0.0, 0.0, 5.0, 0.0)
     _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), PARAMS)
-    # relative velocity must be due north (the tangent): v_g = (5, sqrt(400 - 25))
+    # relative velocity due north (the tangent) at 20 m/s: v_g = (5, 20)
+    assert cmd.speed_m_s == pytest.approx(math.hypot(5.0, 20.0))
+    assert cmd.field_course_rad == pytest.approx(math.atan2(5.0, 20.0))
+    ground = AgentParams(0, ENV, GuidanceParams(300.0, relative_speed=False))
+    _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), ground)
     assert cmd.speed_m_s == pytest.approx(20.0)
     assert cmd.field_course_rad == pytest.approx(math.atan2(5.0, math.sqrt(375.0)))

@@ -286,25 +286,43 @@ def test_prediction_sees_the_crossing_of_simulation_b_and_not_of_simulation_a():
 # ---------------------------------------------------------------- moving target (eq. 15)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(
     st.floats(min_value=-math.pi, max_value=math.pi),
     st.floats(min_value=-12.0, max_value=12.0),
     st.floats(min_value=-12.0, max_value=12.0),
     st.floats(min_value=13.0, max_value=25.0),
+    st.booleans(),
 )
-def test_moving_target_velocity_is_within_limits(angle, tx, ty, s):
+def test_moving_target_velocity_is_within_limits(angle, tx, ty, s, relative):
     dx, dy = math.sin(angle), math.cos(angle)
-    gx, gy, lam = g.moving_target_velocity(dx, dy, tx, ty, s, 13.0, 25.0)
+    gx, gy, lam, held = g.moving_target_velocity(dx, dy, tx, ty, s, 13.0, 25.0, relative)
     speed = math.hypot(gx, gy)
     assert 13.0 - 1e-9 <= speed <= 25.0 + 1e-9
     assert lam >= 0.0
-    if math.hypot(tx, ty) < 13.0:  # always feasible: ground speed exactly s
-        assert speed == pytest.approx(s, rel=1e-9)
+    if math.hypot(tx, ty) < 13.0:  # always feasible
         # the relative velocity v_g - v_t is along the field
         assert (gx - tx) * dy - (gy - ty) * dx == pytest.approx(0.0, abs=1e-9)
+        if not relative:
+            assert speed == pytest.approx(s, rel=1e-9)
+            assert held
+        elif not held:
+            assert lam == s  # eq. (15) with lambda = s: the speed relative to the target is s
+
+
+def test_moving_target_relative_speed_is_eq_15():
+    # target 5 m/s east, field due north: v_g = (5, 20) within limits, lambda = 20
+    gx, gy, lam, held = g.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0)
+    assert (gx, gy, lam, held) == pytest.approx((5.0, 20.0, 20.0, False))
+    # target 10 m/s along the field: 30 m/s would break the limit, so |v_g| = 25
+    gx, gy, lam, held = g.moving_target_velocity(0.0, 1.0, 0.0, 10.0, 20.0, 13.0, 25.0)
+    assert (gx, gy, lam, held) == pytest.approx((0.0, 25.0, 15.0, True))
+    # Frew's choice: the ground speed is 20
+    gx, gy, _, _ = g.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0, False)
+    assert (gx, gy) == pytest.approx((5.0, math.sqrt(375.0)))
 
 
 def test_stationary_target_gives_the_field_itself():
-    gx, gy, lam = g.moving_target_velocity(0.6, 0.8, 0.0, 0.0, 20.0, 13.0, 25.0)
-    assert (gx, gy, lam) == pytest.approx((12.0, 16.0, 20.0))
+    for relative in (True, False):
+        gx, gy, lam, _ = g.moving_target_velocity(0.6, 0.8, 0.0, 0.0, 20.0, 13.0, 25.0, relative)
+        assert (gx, gy, lam) == pytest.approx((12.0, 16.0, 20.0))

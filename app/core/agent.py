@@ -67,6 +67,8 @@ class GuidanceParams:
     course command (``guidance.course_command``); False is the paper's literal eq. (2) loop.
     ``curvature_margin``: fraction of the course-rate limit the optimal c may use.
     ``inverse_field``: the ILVF switch (default: on for ``proposed`` only).
+    ``relative_speed``: with a moving target, the speed command is the speed relative to the
+    target (eq. 15 with lambda = speed); False makes it the ground speed (Frew's choice).
     """
 
     radius_m: float
@@ -80,6 +82,7 @@ class GuidanceParams:
     switch_check_period_s: float = 0.2
     switch_enter_below_m: float = 0.0
     switch_leave_above_m: float = 0.5
+    relative_speed: bool = True
     #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
     orbit_sign: int = field(init=False, repr=False)
     #: whether the ILVF switch is used (derived from ``law`` and ``inverse_field``)
@@ -380,7 +383,7 @@ def agent_step(
         ground_course, ground_rate = rel_course, rel_rate
     else:
         ground_course, ground_rate, speed_cmd = _ground_course(
-            rel_course, rel_rate, tgt, speed_cmd, env
+            rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed
         )
 
     cmd_course = guidance._course_command(
@@ -450,19 +453,29 @@ def _ground_course(
     tgt: TargetInfo,
     speed_cmd: float,
     env: VehicleEnvelope,
+    relative_speed: bool,
 ) -> tuple[float, float, float]:
-    """Eq. (15): ground velocity v_g = v_t + lambda d at the commanded speed, its course and the
-    course's rate (d turning at ``rel_rate``, the target accelerating, |v_g| held constant)."""
+    """Eq. (15): ground velocity v_g = v_t + lambda d for the commanded speed
+    (``guidance.moving_target_velocity``), its course and the course's rate (d turning at
+    ``rel_rate``, the target accelerating; lambda or |v_g| held constant)."""
     dx, dy = math.sin(rel_course), math.cos(rel_course)
-    gx, gy, lam = guidance._moving_target_velocity(
-        dx, dy, tgt.v_east_m_s, tgt.v_north_m_s, speed_cmd, env.min_speed_m_s, env.max_speed_m_s
+    gx, gy, lam, held = guidance._moving_target_velocity(
+        dx,
+        dy,
+        tgt.v_east_m_s,
+        tgt.v_north_m_s,
+        speed_cmd,
+        env.min_speed_m_s,
+        env.max_speed_m_s,
+        relative_speed,
     )
     # d/dt d = rel_rate * (cos chi, -sin chi)
     px, py = rel_rate * dy, -rel_rate * dx
     ax = tgt.a_east_m_s2 + lam * px
     ay = tgt.a_north_m_s2 + lam * py
     along = gx * dx + gy * dy
-    if abs(along) > 1e-6:
+    if held and abs(along) > 1e-6:
+        # |v_g| held constant: lambda_dot from v_g . d(v_g)/dt = 0
         lam_dot = -(gx * ax + gy * ay) / along
         ax += lam_dot * dx
         ay += lam_dot * dy

@@ -518,19 +518,25 @@ def moving_target_velocity(
     speed_m_s: float,
     min_speed_m_s: float,
     max_speed_m_s: float,
-) -> tuple[float, float, float]:
-    """Ground velocity v_g = v_t + lambda v_d of eq. (15) within the speed limits.
+    relative_speed: bool = True,
+) -> tuple[float, float, float, bool]:
+    """Ground velocity v_g = v_t + lambda v_d of eq. (15), v_d the unit field direction ``rel_dir``
+    in the target's frame, with v_min <= |v_g| <= v_max.
 
-    ``rel_dir`` is the field's unit direction in the target's frame. lambda >= 0 is chosen so the
-    ground speed |v_g| equals ``speed_m_s`` clamped to [min, max]:
-    lambda = -(v_t . d) + sqrt((v_t . d)^2 - |v_t|^2 + s^2). When the target is too fast for that
-    (no real root, or a negative one), the lambda >= 0 that comes closest is used, and the ground
-    speed is clamped into the limits along v_g's direction.
+    ``relative_speed=True`` (eq. 15 as written): lambda = ``speed_m_s``, so the vehicle flies the
+    field at that speed *relative to the target* (every vehicle of a team circles the target at
+    the same angular rate, whatever side it is on), unless |v_g| leaves the limits; then lambda
+    is the larger root of |v_t + lambda d| = the limit it crossed.
+    ``relative_speed=False`` (Frew's choice): lambda is the root giving |v_g| = ``speed_m_s``.
+    When no lambda >= 0 reaches the wanted ground speed (a target faster than the vehicle), the
+    lambda >= 0 that comes closest is used and |v_g| is clamped into the limits.
 
     Returns
     -------
-    (float, float, float)
-        v_g east, v_g north (m/s) and lambda (dimensionless speed along the field, m/s per unit).
+    (float, float, float, bool)
+        v_g east, v_g north (m/s), lambda (m/s along the field), and whether the ground speed
+        is held at a fixed value (a limit, or ``speed_m_s`` with ``relative_speed=False``): then
+        d|v_g|/dt = 0, else d lambda/dt = 0.
     """
     _check_finite(
         rel_dir_east=rel_dir_east,
@@ -549,18 +555,41 @@ def moving_target_velocity(
         speed_m_s,
         min_speed_m_s,
         max_speed_m_s,
+        relative_speed,
     )
 
 
+def _lambda_for_ground_speed(along: float, t2: float, s: float) -> float:
+    """The larger root of |v_t + lambda d| = s (|d| = 1), or the closest lambda >= 0."""
+    disc = along * along - t2 + s * s
+    return max(0.0, -along + math.sqrt(disc)) if disc >= 0.0 else max(0.0, -along)
+
+
 def _moving_target_velocity(
-    dx: float, dy: float, tx: float, ty: float, s: float, s_min: float, s_max: float
-) -> tuple[float, float, float]:
+    dx: float,
+    dy: float,
+    tx: float,
+    ty: float,
+    s: float,
+    s_min: float,
+    s_max: float,
+    relative: bool = True,
+) -> tuple[float, float, float, bool]:
     s = min(max(s, s_min), s_max)
     along = tx * dx + ty * dy
-    disc = along * along - (tx * tx + ty * ty) + s * s
-    # the larger root; if even that is negative (a target faster than s, moving along d) or
-    # there is none, the lambda >= 0 closest to ground speed s
-    lam = max(0.0, -along + math.sqrt(disc)) if disc >= 0.0 else max(0.0, -along)
+    t2 = tx * tx + ty * ty
+    held = True
+    if relative:
+        lam = s
+        g2 = (tx + lam * dx) ** 2 + (ty + lam * dy) ** 2
+        if g2 > s_max * s_max:
+            lam = _lambda_for_ground_speed(along, t2, s_max)
+        elif g2 < s_min * s_min:
+            lam = _lambda_for_ground_speed(along, t2, s_min)
+        else:
+            held = False
+    else:
+        lam = _lambda_for_ground_speed(along, t2, s)
     gx, gy = tx + lam * dx, ty + lam * dy
     g = math.hypot(gx, gy)
     if g > s_max or (0.0 < g < s_min):
@@ -568,4 +597,4 @@ def _moving_target_velocity(
         gx, gy = gx * scale, gy * scale
     elif g == 0.0:
         gx, gy = s_min * dx, s_min * dy
-    return gx, gy, lam
+    return gx, gy, lam, held
