@@ -65,8 +65,11 @@ class MissionAgentParams:
     """One agent's fixed configuration.
 
     ``agent`` flies the mission (its ``index`` is replaced each tick by the vehicle's place in
-    the active team); ``standby`` flies the loiter around (``standby_east_m``,
-    ``standby_north_m``). ``main`` carries the federated feedback mode; ``None`` turns feedback
+    the active team); ``track``, when given, replaces it in the track stage (the mission turns
+    the inverse-field switch off there: it serves the approach, and on the circle around a
+    moving, estimated target its crossing prediction is dominated by noise); ``standby`` flies
+    the loiter around (``standby_east_m``, ``standby_north_m``). ``main`` carries the federated
+    feedback mode; ``None`` turns feedback
     off. Fixes and fused estimates older than ``max_age_s`` are not used; a fused estimate is
     predicted forward with ``prediction_model``; ``use_target_accel`` passes the estimated
     acceleration to the moving-target correction.
@@ -79,6 +82,7 @@ class MissionAgentParams:
     standby_north_m: float
     local: LocalParams
     main: MainParams | None = None
+    track: AgentParams | None = None
     max_age_s: float = 3.0
     prediction_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
     use_target_accel: bool = False
@@ -201,7 +205,8 @@ def control(
             fix = fixes.get(vehicle)
             if fix is not None and abs(t_s - fix.t_s) <= params.max_age_s:
                 team.append(fix.at(t_s, params.max_age_s))
-    agent = params.agent if params.agent.index == index else replace(params.agent, index=index)
+    base = params.track if state.stage == "track" and params.track is not None else params.agent
+    agent = base if base.index == index else replace(base, index=index)
     inputs = AgentInputs(t_s=t_s, own=own, target=target, team_positions=tuple(team))
     g, command, events = agent_step(state.guidance, inputs, agent)
     return replace(state, guidance=g), command, events

@@ -99,6 +99,8 @@ class VehicleAgent:
     async def _control(self) -> None:
         async for frame in self._link.telemetry():
             t = frame.t_s
+            if t <= self._last_t and self.counters.ticks > 0:
+                continue  # another message of the same instant: one tick per vehicle time
             self._last_t = t
             own = OwnTelemetry(
                 frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s

@@ -1,0 +1,124 @@
+"""``standoff fly [CONFIG]``: a whole mission in one process (the main job)."""
+
+import argparse
+import asyncio
+import datetime as dt
+import math
+from pathlib import Path
+
+from rich.console import Console
+
+from app.adapters.live_view import LiveView
+from app.config import load_config
+from app.mission_config import MissionConfig
+from app.runtime.mission import build_plan, run_mission
+
+ORDER = 10
+DEFAULT_CONFIG = "hil"
+
+
+def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    p = subparsers.add_parser(
+        "fly",
+        help="fly a mission: built-in simulator (default), SITL or real vehicles",
+        description=(
+            "Fly a cooperative standoff-tracking mission in one process: the vehicles (the "
+            "built-in simulator unless --connect is given), the ground station and one agent "
+            "per vehicle, over the in-process bus or MQTT (--broker). With no CONFIG: the "
+            "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder."
+        ),
+    )
+    p.add_argument(
+        "config",
+        nargs="?",
+        default=DEFAULT_CONFIG,
+        help="mission config: a name in configs/ or a path (default: hil)",
+    )
+    p.add_argument("--out", type=Path, help="run folder (default: a new folder under runs/)")
+    p.add_argument(
+        "--connect",
+        nargs="+",
+        metavar="URL",
+        help="fly external vehicles (udpin://, udpout://, tcp://, serial://)",
+    )
+    p.add_argument("--broker", metavar="URL", help="MQTT broker (mqtt://[user:pass@]host:port)")
+    p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
+    p.add_argument("--speedup", type=float, help="built-in simulator speed-up factor")
+    p.add_argument("--base-port", type=int, help="built-in simulator's first UDP port")
+    p.add_argument("--seed", type=int, help="built-in simulator's random seed")
+    p.add_argument("--quiet", action="store_true", help="no live view")
+    p.set_defaults(handler=run)
+
+
+def default_out_dir(name: str) -> Path:
+    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / f"{name}-{stamp}"
+
+
+def run(args: argparse.Namespace) -> int:
+    config = load_config(args.config, MissionConfig)
+    overrides: dict[str, object] = {}
+    if args.speedup is not None:
+        overrides["speedup"] = args.speedup
+    if args.seed is not None:
+        overrides["seed"] = args.seed
+    if overrides:
+        config = config.model_copy(update={"sim": config.sim.model_copy(update=overrides)})
+    plan = build_plan(config, args.vehicles)
+    out = args.out or default_out_dir(config.name)
+    console = Console()
+    console.print(f"standoff fly: {config.name}, {plan.count} vehicles, run folder {out}")
+    view = LiveView(console) if not args.quiet else None
+    with view if view is not None else _Null():
+        result = asyncio.run(
+            run_mission(
+                plan,
+                out,
+                connect=args.connect or (),
+                broker_url=args.broker,
+                base_port=args.base_port,
+                on_snapshot=view.update if view is not None else None,
+            )
+        )
+    conv = result.summary["convergence"]
+    console.print(_report(result.summary, conv), highlight=False, markup=False)
+    return 0
+
+
+class _Null:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def _fmt(value: object, spec: str = ".1f") -> str:
+    return format(value, spec) if isinstance(value, float) and math.isfinite(value) else "-"
+
+
+def _report(summary: dict[str, object], conv: object) -> str:
+    lines = [
+        f"wall time {_fmt(summary['wall_s'])} s, mission time {_fmt(summary['mission_t_s'])} s"
+    ]
+    if isinstance(conv, dict):
+        lines.append(
+            "from the tracking command: on the circle "
+            f"{_fmt(conv.get('time_to_circle_s'))} s,"
+            f" spaced {_fmt(conv.get('time_to_spacing_s'))} s,"
+            f" both {_fmt(conv.get('time_to_formation_s'))} s"
+        )
+    parts = summary.get("parts")
+    if isinstance(parts, dict):
+        for key, part in parts.items():
+            team = part.get("team", {})
+            d = team.get("distance_error_m", {})
+            sp = team.get("spacing_error_deg", {})
+            est = team.get("estimation_rmse", {})
+            lines.append(
+                f"{key:<14} distance error RMS {_fmt(d.get('rms'))} m"
+                f" (max {_fmt(d.get('max_abs'))}),"
+                f" spacing error RMS {_fmt(sp.get('rms'))} deg (max {_fmt(sp.get('max_abs'))}),"
+                f" estimate RMSE {_fmt(est.get('position_m'), '.2f')} m"
+            )
+    return "\n".join(lines)

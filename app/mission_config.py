@@ -1,0 +1,154 @@
+"""The schema of a mission file (``configs/hil.toml`` and friends), built into runtime values.
+
+One file describes a whole mission: the team and its envelope, the guidance and phase laws, the
+standby point and the tracking command, the stage thresholds, where observations come from,
+the estimator, the vehicle links (the built-in simulator's or ``connect`` URLs), and the bus.
+Angles are degrees in the file.
+"""
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from app.config_models import (
+    Finite,
+    LimitsConfig,
+    NonNegative,
+    Positive,
+    StrictModel,
+    TargetConfig,
+)
+from app.sitl_config import CameraModel, OriginConfig, WindModel
+
+Count = Annotated[int, Field(ge=1, le=50)]
+Fraction = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
+
+
+class GuidanceConfig(StrictModel):
+    """``law``: proposed (optimal c + inverse field), frew (c = 2) or fixed (``c``)."""
+
+    law: Literal["proposed", "frew", "fixed"] = "proposed"
+    c: Positive | None = None
+    feed_forward: bool = True
+    curvature_margin: Fraction = 1.0
+
+    @model_validator(mode="after")
+    def _fixed_needs_c(self) -> "GuidanceConfig":
+        if self.law == "fixed" and self.c is None:
+            raise ValueError("law 'fixed' needs c")
+        return self
+
+
+class PhaseConfig(StrictModel):
+    law: Literal["paper", "frew", "none"] = "paper"
+    gain_per_s: NonNegative = 0.1
+    predictive: bool = True
+
+
+class StandbyConfig(StrictModel):
+    """Where the team loiters until the tracking command (metres about the origin)."""
+
+    east_m: Finite
+    north_m: Finite
+    radius_m: Positive = 150.0
+
+
+class StagesConfig(StrictModel):
+    arrive_tolerance_m: Positive = 15.0
+    radius_tolerance_m: Positive = 3.0
+    spacing_tolerance_deg: Positive = 2.0
+    dwell_s: NonNegative = 5.0
+    moving_speed_m_s: Positive = 1.5
+
+
+class ObservationsConfig(StrictModel):
+    """Where target observations come from.
+
+    ``camera``: each vehicle's CAMERA_TRACKING_GEO_STATUS (the built-in simulator's camera).
+    ``simulated``: the ground station observes the scripted target (``sigma_m``, ``rate_hz``)
+    for vehicles that have no camera (PX4 or ArduPilot SITL). ``replay``: a measurements CSV.
+    ``external``: observations published on the bus under ``external_topic`` by another program.
+    """
+
+    source: Literal["camera", "simulated", "replay", "external"] = "camera"
+    sigma_m: Positive = math.sqrt(10.0)
+    rate_hz: Positive = 10.0
+    seed: Annotated[int, Field(ge=0)] = 1
+    replay_file: str | None = None
+    external_topic: str | None = None
+
+    @model_validator(mode="after")
+    def _source_needs(self) -> "ObservationsConfig":
+        if self.source == "replay" and not self.replay_file:
+            raise ValueError("source 'replay' needs replay_file")
+        if self.source == "external" and not self.external_topic:
+            raise ValueError("source 'external' needs external_topic")
+        return self
+
+
+class EstimatorConfig(StrictModel):
+    """The IMM's process noise per model, the turn model's rate, and the federated feedback."""
+
+    q_cv: Positive = 0.01
+    q_ca: Positive = 0.05
+    q_turn: Positive = 0.05
+    turn_rate_deg_s: Positive = 3.0
+    feedback: Literal["none", "reset", "mixture"] = "mixture"
+    max_lag_s: NonNegative = 1.0
+    use_target_accel: bool = False
+
+
+class LinkSettings(StrictModel):
+    """Vehicle links. Empty ``connect``: the built-in simulator on ``[sim]``'s ports."""
+
+    connect: list[str] = Field(default_factory=list)
+    autopilot: Literal["auto", "velocity", "px4-fixed-wing", "arduplane"] = "auto"
+    altitude_m: Finite = 100.0
+    link_timeout_s: Positive = 2.0
+    connect_timeout_s: Positive = 20.0
+    take_off_timeout_s: Positive = 120.0
+
+
+class SimSettings(StrictModel):
+    """The built-in simulator when no ``connect`` URLs are given."""
+
+    speedup: Positive = 6.0
+    seed: Annotated[int, Field(ge=0)] = 1
+    base_port: Annotated[int, Field(ge=1024, le=65000)] = 14540
+    physics_dt_s: Annotated[float, Field(gt=0.0, le=0.1)] = 0.02
+    telemetry_rate_hz: Positive = 10.0
+    camera: CameraModel = CameraModel()
+    wind: WindModel = WindModel()
+
+
+class MissionConfig(StrictModel):
+    name: str = "mission"
+    vehicles: Count = 3
+    radius_m: Positive = 90.0
+    orbit: Literal["ccw", "cw"] = "ccw"
+    tracking_command_s: NonNegative = 10.0
+    end_s: Positive | None = None
+    tail_s: NonNegative = 30.0
+    limits: LimitsConfig
+    guidance: GuidanceConfig = GuidanceConfig()
+    phase: PhaseConfig = PhaseConfig()
+    standby: StandbyConfig
+    stages: StagesConfig = StagesConfig()
+    target: TargetConfig
+    observations: ObservationsConfig = ObservationsConfig()
+    estimator: EstimatorConfig = EstimatorConfig()
+    link: LinkSettings = LinkSettings()
+    sim: SimSettings = SimSettings()
+    origin: OriginConfig = OriginConfig()
+    bus: str | None = None
+
+    @model_validator(mode="after")
+    def _standby_flyable(self) -> "MissionConfig":
+        turn_m = self.limits.cruise_speed_m_s / self.limits.max_course_rate_rad_s
+        if self.standby.radius_m < 1.05 * turn_m:
+            raise ValueError(
+                f"standby.radius_m {self.standby.radius_m} is tighter than the vehicles can "
+                f"turn at cruise speed (needs >= {1.05 * turn_m:.0f} m)"
+            )
+        return self

@@ -1,0 +1,471 @@
+"""A whole mission in one process (``standoff fly``): vehicles, links, bus, ground and agents.
+
+``build_plan`` turns a validated ``MissionConfig`` into the core parameters every part needs;
+``run_mission`` opens everything in order (simulator, MAVSDK links, bus clients, logs), brings
+each vehicle to offboard control, runs the ground station and one agent per vehicle until the
+scenario ends, and writes the run folder. Leaving it in any way (the end, an error, Ctrl-C)
+puts every vehicle in hold and closes every log.
+"""
+
+import asyncio
+import contextlib
+import dataclasses
+import json
+import logging
+import math
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from contextlib import AsyncExitStack
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from app.adapters.bus import Bus, InProcessBroker, LinkState, Will, open_bus, topics
+from app.adapters.eventlog import EventLog
+from app.adapters.tlog import TlogSample, TlogWriter
+from app.adapters.vehicle.autopilots import SetpointLimits
+from app.adapters.vehicle.link import CourseSpeedCommand, GeodeticOrigin, VehicleLink
+from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.core.agent import AgentParams, GuidanceParams, PhaseParams, VehicleEnvelope
+from app.core.estimation.federated import MainParams
+from app.core.estimation.imm import default_imm_params
+from app.core.estimation.local import LocalParams
+from app.core.ground import GroundParams
+from app.core.mission_agent import MissionAgentParams
+from app.core.stage import StageParams
+from app.errors import ConfigError
+from app.mission_config import MissionConfig
+from app.report.mission_plots import plot_mission
+from app.report.summary import TeamSample, summarize
+from app.report.track import TrackRow, write_track_csv
+from app.runtime.agent import AgentRuntimeParams, VehicleAgent
+from app.runtime.events import EventSink, LoggingSink
+from app.runtime.ground import (
+    GroundRuntimeParams,
+    GroundStation,
+    Measurement,
+    ReplaySource,
+    SimulatedSensor,
+    TickSource,
+)
+from sitl.config import SimConfig, VehicleConfig
+from sitl.fixedwing import FixedWingState
+from sitl.server import SimulatorServer
+from sitl.target import TargetPath
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class MissionPlan:
+    """Everything built from the config, before any I/O."""
+
+    config: MissionConfig
+    target: TargetPath
+    end_t_s: float
+    agents: tuple[MissionAgentParams, ...]
+    ground: GroundParams
+    setpoint_limits: SetpointLimits
+
+    @property
+    def count(self) -> int:
+        return len(self.agents)
+
+
+def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPlan:
+    """Core parameters of every part; raises ConfigError when they do not fit together."""
+    n = vehicles or config.vehicles
+    lim = config.limits
+    try:
+        target = config.target.build()
+        envelope = VehicleEnvelope(
+            lim.cruise_speed_m_s,
+            lim.min_speed_m_s,
+            lim.max_speed_m_s,
+            lim.max_accel_m_s2,
+            lim.max_course_rate_rad_s,
+            lim.course_gain_per_s,
+        )
+        g = config.guidance
+        guidance = GuidanceParams(
+            radius_m=config.radius_m,
+            orbit=config.orbit,
+            law=g.law,
+            c=g.c,
+            feed_forward=g.feed_forward,
+            curvature_margin=g.curvature_margin,
+        )
+        phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
+        standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
+        e = config.estimator
+        imm = default_imm_params(
+            q_cv=e.q_cv,
+            q_ca=e.q_ca,
+            q_turn=e.q_turn,
+            turn_rate_rad_s=math.radians(e.turn_rate_deg_s),
+        )
+        local = LocalParams(
+            imm=imm, default_sigma_m=config.observations.sigma_m, max_lag_s=e.max_lag_s
+        )
+        main = MainParams(feedback=e.feedback)
+        agents = tuple(
+            MissionAgentParams(
+                vehicle=i,
+                agent=AgentParams(i, envelope, guidance, phase),
+                standby=AgentParams(0, envelope, standby, PhaseParams("none")),
+                standby_east_m=config.standby.east_m,
+                standby_north_m=config.standby.north_m,
+                local=local,
+                main=main if e.feedback != "none" else None,
+                track=AgentParams(i, envelope, replace(guidance, inverse_field=False), phase),
+                use_target_accel=e.use_target_accel,
+            )
+            for i in range(n)
+        )
+        s = config.stages
+        ground = GroundParams(
+            vehicles=tuple(range(n)),
+            radius_m=config.radius_m,
+            tracking_command_t_s=config.tracking_command_s,
+            main=main,
+            stages=StageParams(
+                arrive_tolerance_m=s.arrive_tolerance_m,
+                radius_tolerance_m=s.radius_tolerance_m,
+                spacing_tolerance_rad=math.radians(s.spacing_tolerance_deg),
+                dwell_s=s.dwell_s,
+                moving_speed_m_s=s.moving_speed_m_s,
+            ),
+            lost_after_s=max(2.0, 3.0 / config.sim.telemetry_rate_hz),
+        )
+        # The agent's command already keeps the implied course rate k (command - course) within
+        # the limit (agent_step); the link's own course-change limiter would clip the lag
+        # compensation, so the link checks speed and finiteness only.
+        limits = SetpointLimits(lim.min_speed_m_s, lim.max_speed_m_s, None, lim.max_accel_m_s2)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
+    end = config.end_s if config.end_s is not None else target.duration_s + config.tail_s
+    return MissionPlan(config, target, end, agents, ground, limits)
+
+
+def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
+    """The built-in simulator for a plan: the team launched bunched on the standby circle."""
+    cfg = plan.config
+    sign = 1.0 if cfg.orbit == "ccw" else -1.0
+    vehicles = []
+    for i in range(plan.count):
+        a = sign * math.radians(25.0) * i
+        course = -a if sign > 0 else math.pi - a
+        vehicles.append(
+            VehicleConfig(
+                limits=cfg.limits.build(),
+                start=FixedWingState(
+                    cfg.standby.east_m + cfg.standby.radius_m * math.cos(a),
+                    cfg.standby.north_m + cfg.standby.radius_m * math.sin(a),
+                    course,
+                    cfg.limits.cruise_speed_m_s,
+                ),
+                cruise_speed_m_s=cfg.limits.cruise_speed_m_s,
+                altitude_m=cfg.link.altitude_m + 10.0 * i,
+            )
+        )
+    try:
+        return SimConfig(
+            vehicles=tuple(vehicles),
+            target=plan.target,
+            origin_lat_deg=cfg.origin.lat_deg,
+            origin_lon_deg=cfg.origin.lon_deg,
+            origin_alt_m=cfg.origin.alt_m,
+            base_port=base_port,
+            speedup=cfg.sim.speedup,
+            seed=cfg.sim.seed,
+            physics_dt_s=cfg.sim.physics_dt_s,
+            telemetry_rate_hz=cfg.sim.telemetry_rate_hz,
+            camera=cfg.sim.camera.build(),
+            wind=cfg.sim.wind.build(),
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
+
+
+@dataclass
+class MissionResult:
+    out_dir: Path
+    summary: dict[str, Any]
+    samples: list[TeamSample] = field(default_factory=list)
+    interrupted: bool = False
+
+
+Hook = Callable[["MissionContext"], Awaitable[None] | None]
+
+
+@dataclass
+class MissionContext:
+    """What hooks (fault injection in tests, operator actions) can reach while a mission runs."""
+
+    plan: MissionPlan
+    sim: SimulatorServer | None
+    links: dict[int, VehicleLink]
+    ground: GroundStation
+    agents: list[VehicleAgent]
+    buses: list[Bus]
+
+
+def observation_sources(plan: MissionPlan, replay: Sequence[Measurement] = ()) -> list[TickSource]:
+    obs = plan.config.observations
+    if obs.source == "simulated":
+        return [SimulatedSensor(plan.target, obs.sigma_m, obs.rate_hz, obs.seed)]
+    if obs.source == "replay":
+        return [ReplaySource(replay)]
+    return []
+
+
+async def _prepare(link: VehicleLink, plan: MissionPlan, events: EventSink) -> None:
+    """Health, arm, take off, first setpoint, offboard: the MAVSDK idiom, each step checked."""
+    cfg = plan.config.link
+    frame = await link.wait_ready(cfg.connect_timeout_s)
+    await link.arm()
+    await link.take_off(cfg.take_off_timeout_s)
+    latest = link.latest or frame
+    first = CourseSpeedCommand(
+        latest.course_rad, plan.config.limits.cruise_speed_m_s, cfg.altitude_m
+    )
+    await link.start_offboard(first)
+    events.emit("offboard", latest.t_s, vehicle=link.vehicle_id - 1, autopilot=link.autopilot_name)
+
+
+async def _record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
+    async for f in link.telemetry():
+        writer.write(
+            TlogSample(
+                f.t_s,
+                f.latitude_deg,
+                f.longitude_deg,
+                f.altitude_m,
+                f.relative_altitude_m,
+                f.ground_speed_m_s * math.cos(f.course_rad),
+                f.ground_speed_m_s * math.sin(f.course_rad),
+                f.course_rad,
+                f.ground_speed_m_s,
+                armed=f.armed,
+                mode=f.flight_mode.lower(),
+            )
+        )
+
+
+async def _run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -> None:
+    pending = sorted(hooks, key=lambda h: h[0])
+    while pending:
+        t = ctx.ground.state.mission_t_s
+        while pending and t >= pending[0][0]:
+            _, hook = pending.pop(0)
+            result = hook(ctx)
+            if result is not None:
+                await result
+        await asyncio.sleep(0.02)
+
+
+@contextlib.asynccontextmanager
+async def _vehicle_links(
+    plan: MissionPlan, urls: Sequence[str], autopilot: str | None, stack: AsyncExitStack
+) -> AsyncIterator[dict[int, VehicleLink]]:
+    cfg = plan.config
+    origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
+    hub = await stack.enter_async_context(MavsdkHub(urls, origin))
+    link_config = LinkConfig(
+        plan.setpoint_limits,
+        autopilot=autopilot,  # type: ignore[arg-type]  # validated by the config schema
+        link_timeout_s=cfg.link.link_timeout_s,
+    )
+    links: dict[int, VehicleLink] = {}
+    for i in range(plan.count):
+        links[i] = await stack.enter_async_context(
+            hub.link(i + 1, link_config, timeout_s=cfg.link.connect_timeout_s)
+        )
+    yield links
+
+
+async def run_mission(
+    plan: MissionPlan,
+    out_dir: Path,
+    *,
+    connect: Sequence[str] = (),
+    broker_url: str | None = None,
+    base_port: int | None = None,
+    replay: Sequence[Measurement] = (),
+    hooks: Sequence[tuple[float, Hook]] = (),
+    on_snapshot: Callable[[Any], None] | None = None,
+) -> MissionResult:
+    """Fly the plan to its end; write and return the run's results (also when interrupted)."""
+    cfg = plan.config
+    urls = list(connect or cfg.link.connect)
+    builtin = not urls
+    autopilot = None if cfg.link.autopilot == "auto" else cfg.link.autopilot
+    if builtin:
+        autopilot = autopilot or "velocity"  # the built-in simulator takes velocity setpoints
+    broker_url = broker_url if broker_url is not None else cfg.bus
+    ground: GroundStation | None = None
+    links: dict[int, VehicleLink] = {}
+    interrupted = False
+    wall_start = time.monotonic()
+    eventlog = EventLog(out_dir / "events.jsonl")
+    try:
+        async with AsyncExitStack() as stack:
+            stack.enter_context(eventlog)
+            events: EventSink = LoggingSink(eventlog)
+            sim: SimulatorServer | None = None
+            if builtin:
+                port = base_port if base_port is not None else cfg.sim.base_port
+                sim = await stack.enter_async_context(SimulatorServer(sim_config(plan, port)))
+                urls = [f"udpin://127.0.0.1:{e.gcs_port}" for e in sim.endpoints]
+            events.emit(
+                "mission_start",
+                0.0,
+                name=cfg.name,
+                vehicles=plan.count,
+                urls=urls,
+                bus=broker_url or "in-process",
+            )
+            links = await stack.enter_async_context(_vehicle_links(plan, urls, autopilot, stack))
+            async with asyncio.TaskGroup() as tg:
+                for link in links.values():
+                    tg.create_task(_prepare(link, plan, events), name=f"prepare-{link.vehicle_id}")
+            broker = InProcessBroker() if broker_url is None else None
+
+            async def client(name: str, will: Will | None = None) -> Bus:
+                if broker_url is None:
+                    return await stack.enter_async_context(
+                        open_bus(None, client_id=name, will=will, broker=broker)
+                    )
+                return await stack.enter_async_context(
+                    open_bus(broker_url, client_id=name, will=will)
+                )
+
+            ground_bus = await client("ground")
+            ground = GroundStation(
+                plan.ground,
+                GroundRuntimeParams(end_t_s=plan.end_t_s),
+                ground_bus,
+                events,
+                truth=plan.target if builtin or cfg.observations.source == "simulated" else None,
+                sources=observation_sources(plan, replay),
+                external_observations=cfg.observations.external_topic
+                if cfg.observations.source == "external"
+                else None,
+                on_snapshot=on_snapshot,
+            )
+            agents = []
+            buses = [ground_bus]
+            for i, link in links.items():
+                name = f"agent-{i}"
+                will = Will(
+                    topics.link(i), LinkState(sender=name, t_s=0.0, online=False, vehicle=i)
+                )
+                agent_bus = await client(name, will)
+                buses.append(agent_bus)
+                agents.append(
+                    VehicleAgent(
+                        plan.agents[i],
+                        link,
+                        agent_bus,
+                        events,
+                        AgentRuntimeParams(altitude_m=cfg.link.altitude_m),
+                    )
+                )
+            ctx = MissionContext(plan, sim, links, ground, agents, buses)
+            tlogs = [
+                stack.enter_context(
+                    TlogWriter(out_dir / f"vehicle-{i + 1}.tlog", i + 1, time.time())
+                )
+                for i in links
+            ]
+            try:
+                async with asyncio.TaskGroup() as tg:
+                    helpers = [tg.create_task(a.run(), name=a.name) for a in agents]
+                    helpers += [
+                        tg.create_task(_record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
+                        for i, link in links.items()
+                    ]
+                    if hooks:
+                        helpers.append(tg.create_task(_run_hooks(hooks, ctx), name="hooks"))
+                    await ground.run()
+                    for task in helpers:
+                        task.cancel()
+            except asyncio.CancelledError:
+                interrupted = True
+                events.emit("interrupted", ground.state.mission_t_s)
+                raise
+    finally:
+        # every vehicle is in hold and every log closed by now; write the run folder
+        wall_s = time.monotonic() - wall_start
+        result = _write_outputs(plan, out_dir, ground, eventlog, links, wall_s, interrupted)
+    return result
+
+
+def _write_outputs(
+    plan: MissionPlan,
+    out_dir: Path,
+    ground: GroundStation | None,
+    eventlog: EventLog,
+    links: dict[int, VehicleLink],
+    wall_s: float,
+    interrupted: bool,
+) -> MissionResult:
+    samples = ground.samples if ground is not None else []
+    summary = summarize(
+        samples,
+        plan.config.radius_m,
+        plan.config.tracking_command_s,
+        plan.ground.stages.radius_tolerance_m,
+        plan.ground.stages.spacing_tolerance_rad,
+    )
+    counters = {
+        str(i): dataclasses.asdict(c)
+        for i, link in links.items()
+        if dataclasses.is_dataclass(c := getattr(link, "counters", None))
+        and not isinstance(c, type)
+    }
+    summary.update(
+        {
+            "mission": plan.config.name,
+            "vehicles": plan.count,
+            "end_t_s": plan.end_t_s,
+            "mission_t_s": ground.state.mission_t_s if ground is not None else 0.0,
+            "wall_s": wall_s,
+            "interrupted": interrupted,
+            "events": dict(eventlog.counts),
+            "links": counters,
+        }
+    )
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    nan = math.nan
+    rows = [
+        TrackRow(
+            s.t_s,
+            v.vehicle,
+            v.east_m,
+            v.north_m,
+            v.course_rad,
+            v.speed_m_s,
+            s.target_east_m,
+            s.target_north_m,
+            (float(v.active), *(s.estimate[:2] if s.estimate is not None else (nan, nan))),
+        )
+        for s in samples
+        for v in s.vehicles
+    ]
+    write_track_csv(
+        out_dir / "track.csv", rows, extra_columns=("active", "estimate_east_m", "estimate_north_m")
+    )
+    _add_stage_column(out_dir / "track.csv", samples)
+    if samples:
+        plot_mission(samples, plan.config.radius_m, out_dir)
+    return MissionResult(out_dir, summary, samples, interrupted)
+
+
+def _add_stage_column(path: Path, samples: Sequence[TeamSample]) -> None:
+    lines = path.read_text(encoding="utf-8").splitlines()
+    stages = [s.stage for s in samples for _ in s.vehicles]
+    out = [lines[0] + ",stage"] + [
+        f"{line},{stage}" for line, stage in zip(lines[1:], stages, strict=True)
+    ]
+    path.write_text("\n".join(out) + "\n", encoding="utf-8")
