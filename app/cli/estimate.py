@@ -76,7 +76,7 @@ class LocalConfig(StrictModel):
 
 class FederatedConfig(StrictModel):
     feedback: FeedbackMode = "modewise"
-    feedback_period_s: float = Field(default=0.1, ge=0.0, allow_inf_nan=False)
+    feedback_period_s: float = Field(default=0.0, ge=0.0, allow_inf_nan=False)
     max_age_s: float = Field(default=2.0, gt=0.0, allow_inf_nan=False)
     scale_process_noise: bool = True
     time_update_q: float = Field(default=5e-4, ge=0.0, allow_inf_nan=False)

@@ -177,30 +177,43 @@ def _fuse_modewise(
     imm: IMMParams,
     shared: GlobalEstimate | None,
 ) -> GlobalEstimate:
-    states = []
-    for e in fresh:
+    k, r = len(fresh), imm.n_models
+    xs = np.empty((k, r, 6))
+    ps = np.empty((k, r, 6, 6))
+    mus = np.empty((k, r))
+    # shares of one allocation (same arrays, same time) differ only by the scale of their
+    # covariances, and every model is linear, so one prediction serves them all
+    done: dict[tuple[float, int, int], tuple[IMMState, float]] = {}
+    for i, e in enumerate(fresh):
         if e.model_x is None or e.model_p is None:
             raise ValueError(f"local estimate from {e.sensor!r} has no model-conditioned states")
+        key = (e.t_s, id(e.model_x), id(e.mu))
+        hit = done.get(key)
+        if hit is not None:
+            base, base_scale = hit
+            xs[i], ps[i], mus[i] = base.x, base.p * (e.q_scale / base_scale), base.mu
+            continue
         state = IMMState(e.t_s, np.asarray(e.model_x), np.asarray(e.model_p), e.mu, e.q_scale)
-        states.append(imm_predict(state, t_s, imm) if e.t_s < t_s else state)
-    r = imm.n_models
-    model_x = np.empty((r, 6))
-    model_p = np.empty((r, 6, 6))
-    for j in range(r):
-        model_x[j], model_p[j] = _information_sum(
-            np.stack([s.x[j] for s in states]), np.stack([s.p[j] for s in states])
-        )
+        if e.t_s < t_s:
+            state = imm_predict(state, t_s, imm)
+        done[key] = (state, e.q_scale)
+        xs[i], ps[i], mus[i] = state.x, state.p, state.mu
+    # per model: P_gj = (sum_i P_ij^-1)^-1, X_gj = P_gj sum_i P_ij^-1 X_ij
+    infos = np.linalg.inv(ps)  # (k, r, 6, 6)
+    info = infos.sum(axis=0)
+    model_p = np.linalg.inv(0.5 * (info + info.swapaxes(1, 2)))
+    model_p = 0.5 * (model_p + model_p.swapaxes(1, 2))
+    model_x = (model_p @ (infos @ xs[..., None]).sum(axis=0))[..., 0]
     # product rule: each local mu_i ~ c * L_i from a common prior c
-    log_mu = np.sum([np.log(np.maximum(s.mu, 1e-300)) for s in states], axis=0)
-    if shared is not None and shared.mu is not None and len(states) > 1:
+    log_mu = np.sum(np.log(np.maximum(mus, 1e-300)), axis=0)
+    if shared is not None and shared.mu is not None and k > 1:
         prior = shared.mu @ imm.transition_for(t_s - shared.t_s)
-        log_mu -= (len(states) - 1) * np.log(np.maximum(prior, 1e-300))
+        log_mu -= (k - 1) * np.log(np.maximum(prior, 1e-300))
     mu = np.exp(log_mu - np.max(log_mu))
     mu = np.maximum(mu / mu.sum(), 1e-12)
     mu /= mu.sum()
     x_g, p_g = combine(model_x, model_p, mu)
-    combined_p = np.stack([s.combined()[1] for s in states])
-    beta = information_shares(combined_p)
+    beta = information_shares(np.stack([e.p for e in fresh]))
     return GlobalEstimate(
         t_s=float(t_s),
         x=x_g,

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from app.core.estimation.linalg import symmetrise
+from app.core.estimation.linalg import ensure_spd, symmetrise
 from app.core.estimation.models import STATE_DIM, MotionModel
 from app.core.estimation.ukf import SigmaPoints, position_update, unscented_predict
 
@@ -202,6 +202,7 @@ def imm_update(predicted: IMMState, z: FloatArray, r: FloatArray) -> IMMUpdate:
     so a far-off observation cannot underflow every likelihood to 0).
     """
     x, p, nis, loglik = position_update(predicted.x, predicted.p, z, r, predicted.cov_scale)
+    p = ensure_spd(p)  # round-off after a very long prediction can break definiteness
     logw = loglik + np.log(np.maximum(predicted.mu, _MU_FLOOR))
     w = np.exp(logw - np.max(logw))
     mu = np.maximum(w / w.sum(), _MU_FLOOR)

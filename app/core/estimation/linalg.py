@@ -20,13 +20,40 @@ def symmetrise(p: FloatArray) -> FloatArray:
 
 
 def nearest_spd(p: FloatArray, floor: float = 1e-12) -> FloatArray:
-    """The symmetric matrix nearest to ``p`` whose eigenvalues are at least ``floor`` times its
-    largest (and at least ``floor``); shape (n, n)."""
+    """A symmetric positive definite matrix near ``p`` (n, n), repaired in correlation space.
+
+    P = D C D with D = diag(sqrt(diag P)); the eigenvalues of the correlation matrix C are
+    clipped at ``floor``, so every variance keeps its own scale even when they span many orders
+    of magnitude (metres next to a covariance grown over hours). Non-positive variances are
+    raised to ``floor`` times the largest (or to ``floor``).
+    """
     sym = symmetrise(p)
-    vals, vecs = np.linalg.eigh(sym)
-    scale = max(float(np.max(np.abs(vals))), 1.0)
-    vals = np.maximum(vals, floor * scale)
-    return symmetrise((vecs * vals) @ vecs.T)
+    diag = np.diag(sym).copy()
+    top = max(float(np.max(diag)), 1.0) if diag.size else 1.0
+    diag = np.where(diag > 0.0, diag, floor * top)
+    d = np.sqrt(diag)
+    corr = sym / np.outer(d, d)
+    np.fill_diagonal(corr, 1.0)
+    vals, vecs = np.linalg.eigh(corr)
+    corr = (vecs * np.maximum(vals, floor)) @ vecs.T
+    return symmetrise(corr * np.outer(d, d))
+
+
+def ensure_spd(p: FloatArray) -> FloatArray:
+    """``p`` (k, n, n) unchanged if every matrix factorises, else with the failing ones repaired
+    by ``nearest_spd``."""
+    try:
+        np.linalg.cholesky(p)
+        return p
+    except np.linalg.LinAlgError:
+        pass
+    out = p.copy()
+    for i in range(p.shape[0]):
+        try:
+            np.linalg.cholesky(p[i])
+        except np.linalg.LinAlgError:
+            out[i] = nearest_spd(p[i])
+    return out
 
 
 def robust_cholesky(p: FloatArray) -> FloatArray:
@@ -37,9 +64,12 @@ def robust_cholesky(p: FloatArray) -> FloatArray:
     """
     try:
         out: FloatArray = np.linalg.cholesky(p).astype(np.float64, copy=False)
-        return out
     except np.linalg.LinAlgError:
         pass
+    else:
+        if np.isfinite(out).all():
+            return out
+        raise np.linalg.LinAlgError("covariance has non-finite entries")
     if p.ndim == 3:
         return np.stack([robust_cholesky(m) for m in p])
     sym = symmetrise(p)

@@ -52,6 +52,9 @@ def _array(raw: Mapping[str, Any], key: str, kind: str, shape: tuple[int, ...]) 
 
 
 def _frozen(a: FloatArray) -> FloatArray:
+    """A read-only float64 array with the values of ``a`` (``a`` itself if it already is one)."""
+    if isinstance(a, np.ndarray) and a.dtype == np.float64 and not a.flags.writeable:
+        return a
     out = np.array(a, dtype=np.float64)
     out.setflags(write=False)
     return out

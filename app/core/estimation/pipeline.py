@@ -41,7 +41,7 @@ class FederatedParams:
 
     local: LocalParams
     main: MainParams = field(default_factory=MainParams)
-    feedback_period_s: float = 0.1
+    feedback_period_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.feedback_period_s) and self.feedback_period_s >= 0.0):
