@@ -18,6 +18,7 @@ from sitl.camera import Observation, TrackingCamera
 from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState, step, wrap_pi
 from sitl.geodesy import Geodesy
+from sitl.guidance import Command, LineCommand, LoiterCommand, VelocityCommand, guide
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +52,6 @@ TAKEOFF: Final = Px4Mode("takeoff", PX4_MAIN_AUTO, PX4_SUB_AUTO_TAKEOFF)
 _MODES_BY_CUSTOM: Final = {(m.main, m.sub): m for m in (OFFBOARD, HOLD, RETURN, TAKEOFF)}
 
 TAKEOFF_DURATION_S: Final = 5.0
-LINE_LOOKAHEAD_M: Final = 50.0
 MIN_VELOCITY_SETPOINT_M_S: Final = 0.5
 
 # SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
@@ -118,38 +118,6 @@ Outgoing = tuple[int, mavlink.MAVLink_message]  # (source component id, message)
 GeoLookup = Callable[[], tuple[float, float, float]]  # () -> (lat_deg, lon_deg, alt_amsl_m)
 
 
-@dataclass(frozen=True, slots=True)
-class VelocityCommand:
-    """Fly a course at a speed (offboard velocity setpoint)."""
-
-    course_rad: float
-    speed_m_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class LoiterCommand:
-    """Fly to a point and circle it (hold, return, a position setpoint)."""
-
-    center_east_m: float
-    center_north_m: float
-    radius_m: float
-    clockwise: bool
-    speed_m_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class LineCommand:
-    """Fly the line through a point along a course (position + velocity setpoint, as PX4 does)."""
-
-    east_m: float
-    north_m: float
-    course_rad: float
-    speed_m_s: float
-
-
-Command = VelocityCommand | LoiterCommand | LineCommand
-
-
 def _param_name(param_id: str | bytes) -> str:
     if isinstance(param_id, bytes):
         param_id = param_id.decode("ascii", "replace")
@@ -159,33 +127,6 @@ def _param_name(param_id: str | bytes) -> str:
 def _as_int(value: float, default: int = 0) -> int:
     """A command parameter as an integer; NaN or infinity ("unused") gives ``default``."""
     return round(value) if math.isfinite(value) else default
-
-
-def guide(state: FixedWingState, cmd: Command, course_gain_per_s: float) -> tuple[float, float]:
-    """The (course, speed) command that flies ``cmd`` from ``state``.
-
-    Loiter: a circulating vector field (course to the tangent, bent toward the circle by
-    atan(d / R), d the distance off the circle), plus the circle's own turn rate fed forward
-    through the course loop's gain so the P loop of eq. (2) settles on the circle, not off it.
-    At the centre (r -> 0) the bearing is undefined: fly the current course outward.
-    """
-    if isinstance(cmd, VelocityCommand):
-        return cmd.course_rad, cmd.speed_m_s
-    if isinstance(cmd, LineCommand):
-        right_e, right_n = math.cos(cmd.course_rad), -math.sin(cmd.course_rad)
-        cross_m = (state.east_m - cmd.east_m) * right_e + (state.north_m - cmd.north_m) * right_n
-        return cmd.course_rad - math.atan(cross_m / LINE_LOOKAHEAD_M), cmd.speed_m_s
-    d_east = state.east_m - cmd.center_east_m
-    d_north = state.north_m - cmd.center_north_m
-    r = math.hypot(d_east, d_north)
-    if r < 1e-3:
-        return state.course_rad, cmd.speed_m_s
-    sense = 1.0 if cmd.clockwise else -1.0
-    bearing = math.atan2(d_east, d_north)  # from the centre to the vehicle, clockwise from north
-    off = (r - cmd.radius_m) / cmd.radius_m
-    course = bearing + sense * (0.5 * math.pi + math.atan(2.0 * off))
-    feed_forward = sense * (state.speed_m_s / cmd.radius_m) * max(0.0, 1.0 - abs(off))
-    return course + feed_forward / course_gain_per_s, cmd.speed_m_s
 
 
 @dataclass(frozen=True, slots=True)

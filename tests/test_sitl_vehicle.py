@@ -6,23 +6,16 @@ import struct
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.camera import TrackingCamera
 from sitl.config import CameraConfig, SimConfig, VehicleConfig, default_limits, default_vehicles
 from sitl.fixedwing import FixedWingState, wrap_pi
 from sitl.geodesy import Geodesy
-from sitl.vehicle import (
-    CAMERA_COMPONENT,
-    HOLD,
-    OFFBOARD,
-    RETURN,
-    TAKEOFF,
-    LineCommand,
-    LoiterCommand,
-    SimVehicle,
-    VelocityCommand,
-)
+from sitl.guidance import LineCommand, LoiterCommand, VelocityCommand
+from sitl.vehicle import CAMERA_COMPONENT, HOLD, OFFBOARD, RETURN, TAKEOFF, SimVehicle
 
 DT = 0.02
 GCS = mavlink.MAVLink(None, 255, 190)
@@ -521,3 +514,52 @@ def test_px4_parameters_set_the_failsafe_cruise_speed_and_loiter_radius():
     assert rig.send(mavlink.MAVLink_param_set_message(1, 1, b"NO_SUCH", 1.0, 9)) == []
     ((_, read),) = rig.send(mavlink.MAVLink_param_request_read_message(1, 1, b"", 1))
     assert read.param_id == "COM_OBL_RC_ACT"
+
+
+ANY_FLOAT = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, width=32),
+    st.sampled_from([0.0, -1.0, 1e30, -1e30, math.nan, math.inf]),
+)
+COMMANDS = st.sampled_from(
+    [
+        mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+        mavlink.MAV_CMD_DO_SET_MODE,
+        mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+        mavlink.MAV_CMD_REQUEST_MESSAGE,
+        mavlink.MAV_CMD_DO_CHANGE_SPEED,
+        mavlink.MAV_CMD_DO_REPOSITION,
+        mavlink.MAV_CMD_NAV_TAKEOFF,
+        mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+        mavlink.MAV_CMD_GET_HOME_POSITION,
+        0,
+        65535,
+    ]
+)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    command=COMMANDS,
+    params=st.lists(ANY_FLOAT, min_size=7, max_size=7),
+    mask=st.integers(0, 0xFFFF),
+    frame=st.sampled_from([mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_NED, 0, 255]),
+    setpoint=st.lists(ANY_FLOAT, min_size=5, max_size=5),
+)
+def test_no_input_breaks_the_vehicle(command, params, mask, frame, setpoint):
+    """Whatever a client sends, the vehicle answers or ignores it and keeps flying sanely."""
+    rig = Rig()
+    rig.ack(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    x, y, vx, vy, yaw = setpoint
+    rig.send(
+        mavlink.MAVLink_set_position_target_local_ned_message(
+            0, 1, 1, frame, mask, x, y, 0.0, vx, vy, 0.0, 0, 0, 0, yaw, 0.0
+        )
+    )
+    rig.send(mavlink.MAVLink_command_long_message(1, 1, command, 0, *params))
+    rig.ack(mavlink.MAV_CMD_DO_SET_MODE, 1.0, 6.0, 0.0)  # offboard, if the setpoint was usable
+    rig.fly(3.0)
+    state = rig.vehicle.state
+    limits = rig.sim.vehicles[0].limits
+    assert all(math.isfinite(v) for v in (state.east_m, state.north_m, state.course_rad))
+    if rig.vehicle.in_air:
+        assert limits.min_speed_m_s <= state.speed_m_s <= limits.max_speed_m_s
