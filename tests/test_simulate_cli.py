@@ -33,7 +33,7 @@ def test_simulate_team_prints_phase_figures_and_the_bound(tmp_path, capsys):
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "phase spacing within 2 deg" in out
-    assert "speed-limited lower bound" in out
+    assert "speed-limited lower bound for that" in out
     assert (tmp_path / "phase.png").exists()
 
 

@@ -160,7 +160,9 @@ def run(args: argparse.Namespace) -> int:
         ph = phase_figures(result)
         print(f"  phase spacing within 2 deg of 360/n for good: {_fmt_s(ph.settle_s)}")
         bound = phase_lower_bound_s(setup)
-        print(f"  speed-limited lower bound for that: {bound:.1f} s")
+        on_circle = bool((abs(result.distance_error_m()[0]) < 3.0).all())
+        kind = "lower bound" if on_circle else "estimate (fixed cruise paths)"
+        print(f"  speed-limited {kind} for that: {bound:.1f} s")
         print(
             f"  speeds {ph.min_speed_m_s:.2f}..{ph.max_speed_m_s:.2f} m/s, "
             f"max |acceleration| {ph.max_abs_accel_m_s2:.2f} m/s^2"

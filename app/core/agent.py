@@ -348,8 +348,28 @@ def agent_step(
        motion (eq. 15) to a ground velocity at the commanded speed, and lag-compensated with the
        ground course's own rate (``guidance.course_command``).
 
-    Pure: never mutates its arguments; returns ``state`` itself when nothing changed. Raises
-    ``ValueError`` on non-finite inputs. The command is always finite, its speed within the
+    Parameters
+    ----------
+    state : AgentState
+        What the agent remembered from its last tick (``AgentState()`` at the start).
+    inputs : AgentInputs
+        This tick: time (s), own telemetry (m east/north, course rad clockwise from north, m/s),
+        the target (truth or estimate: m, m/s, m/s^2) and the team's positions (m).
+    params : AgentParams
+        The vehicle's index in the team, its envelope, the guidance and phase laws.
+
+    Returns
+    -------
+    (AgentState, Command, tuple of AgentEvent)
+        The new state (``state`` itself when nothing changed), the (course, speed) command, and
+        the events of this tick (ILVF switches), usually empty.
+
+    Raises
+    ------
+    ValueError
+        On a non-finite input (naming it), a negative speed, or an index outside the team.
+
+    Pure: never mutates its arguments. The command is always finite, its speed within the
     envelope, its implied course rate k * (command - course) within the course-rate limit.
     """
     _check_inputs(inputs)

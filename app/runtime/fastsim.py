@@ -298,15 +298,22 @@ def phase_figures(
 def phase_lower_bound_s(setup: SimulationSetup, tolerance_rad: float = math.radians(2.0)) -> float:
     """Speed-limited lower bound on the spacing time of ``setup`` (any speed-based controller).
 
-    Runs the team at cruise speed with no phase keeping, takes each vehicle's phase at the end
-    (all on the circle by then; phases at cruise keep their differences), and asks
+    Runs the team at cruise speed with no phase keeping for at least 400 s, takes each vehicle's
+    phase at the end (all on the circle by then; phases at cruise keep their differences), asks
     ``phase.phase_time_lower_bound`` how soon speed changes within the limits could bring the
     offsets together. Speed changes made before a vehicle reaches the circle move its phase less
     than on the circle, and the path's shape is taken as the cruise path, so this is a lower bound
     up to that small approximation.
     """
     cruise_agents = tuple(replace(a, phase=replace(a.phase, law="none")) for a in setup.agents)
-    result = run_simulation(replace(setup, agents=cruise_agents))
+    # long enough for every vehicle to be on the circle; a coarse step is plenty for phases
+    cruise = replace(
+        setup,
+        agents=cruise_agents,
+        dt_s=max(setup.dt_s, 0.05),
+        duration_s=max(setup.duration_s, 400.0),
+    )
+    result = run_simulation(cruise)
     phases = [float(p) for p in result.phases_rad()[-1]]
     order = orbit_order(phases)
     ref = phases[order[0]]
