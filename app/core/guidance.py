@@ -448,7 +448,9 @@ def predict_min_distance_error(
     - the course is aligned with the field (within 0.01 rad) while the field's peak curvature is
       within W / s: from there the vehicle follows a field line, and field lines never cross the
       circle ((r^2 - r_d^2)^2 does not increase along them);
-    - the vehicle is more than 2.2 turn radii outside the circle and moving away;
+    - with feed-forward, the vehicle is more than 2.2 turn radii outside the circle and moving
+      away (a lagging literal loop is followed to the horizon instead: it may still come back
+      and overshoot);
     - the horizon ends.
 
     This is the guidance's own model of the closed loop, used only for this prediction.
@@ -483,7 +485,7 @@ def predict_min_distance_error(
             min_err = err
             if err < 0.0:
                 return min_err
-        elif err > far_m and x * math.sin(chi) + y * math.cos(chi) > 0.0:
+        elif feed_forward and err > far_m and x * math.sin(chi) + y * math.cos(chi) > 0.0:
             return min_err
     return min_err
 
