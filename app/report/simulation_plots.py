@@ -69,8 +69,8 @@ def plot_standoff(results: Mapping[str, SimulationResult], path: str | Path, tit
 
 
 def plot_phase(result: SimulationResult, path: str | Path, title: str) -> Path:
-    """Fig. 15: (a) trajectories, (b) speeds, (c) the gaps between adjacent vehicles (deg) with
-    the 2-degree band around 360 / n. Returns the written path."""
+    """Fig. 15: (a) trajectories (dot: start, square: end), (b) speeds, (c) the gaps between
+    adjacent vehicles (deg) with the 2-degree band around 360 / n. Returns the written path."""
     n = result.n_vehicles
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2), constrained_layout=True)
     ax_xy, ax_v, ax_ph = axes
@@ -81,6 +81,7 @@ def plot_phase(result: SimulationResult, path: str | Path, title: str) -> Path:
             result.east_m[:, i], result.north_m[:, i], color=colour, lw=1.2, label=f"UAV{i + 1}"
         )
         ax_xy.plot(result.east_m[0, i], result.north_m[0, i], "o", color=colour, ms=4)
+        ax_xy.plot(result.east_m[-1, i], result.north_m[-1, i], "s", color=colour, ms=7)
         ax_v.plot(result.t_s, result.speed_m_s[:, i], color=colour, lw=1.2, label=f"UAV{i + 1}")
     gaps = np.degrees(adjacent_phase_differences(result.phases_rad()))
     for k in range(n):
