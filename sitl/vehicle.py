@@ -14,6 +14,7 @@ from typing import Final
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl import telemetry
 from sitl.camera import Observation, TrackingCamera
 from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState, step, wrap_pi
@@ -24,7 +25,6 @@ log = logging.getLogger(__name__)
 
 AUTOPILOT_COMPONENT: Final = 1
 CAMERA_COMPONENT: Final = 100
-GRAVITY_M_S2: Final = 9.80665
 
 # PX4 custom modes: main mode in bits 16-23 of custom_mode, sub mode in bits 24-31
 PX4_MAIN_AUTO: Final = 4
@@ -60,29 +60,6 @@ _IGNORE_Y: Final = 2
 _IGNORE_VX: Final = 8
 _IGNORE_VY: Final = 16
 _IGNORE_YAW: Final = 1024
-
-_SENSORS: Final = (
-    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-    | mavlink.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE
-    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
-    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-    | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-    | mavlink.MAV_SYS_STATUS_AHRS
-    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
-)
-_CAPABILITIES: Final = (
-    mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-)
 
 # The PX4 parameters the simulator honours, in PARAM_REQUEST_LIST order
 PARAM_OFFBOARD_LOSS_TIMEOUT: Final = "COM_OF_LOSS_T"  # s, simulated
@@ -176,6 +153,7 @@ class SimVehicle:
         )
         self.home_east_m = config.start.east_m
         self.home_north_m = config.start.north_m
+        self._home_lla = geodesy.to_geodetic(self.home_east_m, self.home_north_m, 0.0)
         self.armed = False
         self.in_air = False
         self.mode = HOLD
@@ -622,136 +600,51 @@ class SimVehicle:
 
     def tracking_message(self, obs: Observation, lat: float, lon: float, alt: float) -> Outgoing:
         """CAMERA_TRACKING_GEO_STATUS for an observation geolocated at (lat, lon, alt)."""
-        nan = math.nan
-        msg = mavlink.MAVLink_camera_tracking_geo_status_message(
-            tracking_status=mavlink.CAMERA_TRACKING_STATUS_FLAGS_ACTIVE,
-            lat=round(lat * 1e7),
-            lon=round(lon * 1e7),
-            alt=alt,
-            h_acc=obs.sigma_m,
-            v_acc=nan,
-            vel_n=nan,
-            vel_e=nan,
-            vel_d=nan,
-            vel_acc=nan,
-            dist=obs.range_m,
-            hdg=nan,
-            hdg_acc=nan,
-            camera_device_id=0,
-        )
         self.observations_sent += 1
         self.last_observation = obs
-        return CAMERA_COMPONENT, msg
+        return CAMERA_COMPONENT, telemetry.camera_tracking_geo_status(obs, lat, lon, alt)
 
     def _message_by_id(
         self, msg_id: int, t_s: float, geo: GeoLookup | None = None
     ) -> Outgoing | None:
+        """Message ``msg_id`` now, or None if this vehicle does not send it."""
+        msg = self._build(msg_id, t_s, geo or self._own_geo)
+        return None if msg is None else (AUTOPILOT_COMPONENT, msg)
+
+    def _own_geo(self) -> tuple[float, float, float]:
+        return self._geodesy.to_geodetic(self.state.east_m, self.state.north_m, self.altitude_m)
+
+    def _build(self, msg_id: int, t_s: float, geo: GeoLookup) -> mavlink.MAVLink_message | None:
         s = self.state
-        boot_ms = round(t_s * 1000.0) & 0xFFFFFFFF
         if msg_id == _HEARTBEAT_ID:
-            return self._heartbeat()
+            return telemetry.heartbeat(self.mode.custom_mode, self.armed)
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            return self._autopilot_version()
+            return telemetry.autopilot_version(self.system_id)
         if msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
-            return self._home_position(t_s)
+            return telemetry.home_position(
+                *self._home_lla, self.home_east_m, self.home_north_m, t_s
+            )
         if msg_id == mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
-            landed = (
-                mavlink.MAV_LANDED_STATE_IN_AIR
-                if self.in_air
-                else mavlink.MAV_LANDED_STATE_ON_GROUND
-            )
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_extended_sys_state_message(
-                mavlink.MAV_VTOL_STATE_UNDEFINED, landed
-            )
+            return telemetry.extended_sys_state(self.in_air)
         if msg_id == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_sys_status_message(
-                _SENSORS,
-                _SENSORS,
-                _SENSORS,
-                100,
-                self._voltage_mv(),
-                500,
-                round(100 * self._battery_fraction),
-                0,
-                0,
-                0,
-                0,
-                0,
-                0,
-            )
+            return telemetry.sys_status(self._battery_fraction)
         if msg_id == mavlink.MAVLINK_MSG_ID_BATTERY_STATUS:
-            cells = [65535] * 10
-            cells[0] = self._voltage_mv()
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_battery_status_message(
-                0,
-                mavlink.MAV_BATTERY_FUNCTION_ALL,
-                mavlink.MAV_BATTERY_TYPE_LIPO,
-                2500,
-                cells,
-                500,
-                -1,
-                -1,
-                round(100 * self._battery_fraction),
-            )
-        heading = s.course_rad % (2.0 * math.pi)
-        v_north, v_east = self._ground_velocity()
-        ground_speed = math.hypot(v_north, v_east)
+            return telemetry.battery_status(self._battery_fraction)
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
-            roll = math.atan(s.speed_m_s * s.course_rate_rad_s / GRAVITY_M_S2)
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_attitude_message(
-                boot_ms, roll, 0.0, wrap_pi(heading), 0.0, 0.0, s.course_rate_rad_s
-            )
+            return telemetry.attitude(s, t_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
-            roll = math.atan(s.speed_m_s * s.course_rate_rad_s / GRAVITY_M_S2)
-            cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-            cy, sy = math.cos(0.5 * heading), math.sin(0.5 * heading)
-            # yaw then roll (pitch 0): q = q_yaw * q_roll
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_attitude_quaternion_message(
-                boot_ms, cy * cr, cy * sr, sy * sr, sy * cr, 0.0, 0.0, s.course_rate_rad_s
-            )
+            return telemetry.attitude_quaternion(s, t_s)
+        v_north, v_east = self._ground_velocity()
         if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_local_position_ned_message(
-                boot_ms, s.north_m, s.east_m, -self.altitude_m, v_north, v_east, 0.0
-            )
+            return telemetry.local_position_ned(s, self.altitude_m, v_north, v_east, t_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_VFR_HUD:
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_vfr_hud_message(
-                s.speed_m_s,
-                ground_speed,
-                round(math.degrees(heading)) % 360,
-                60 if self.in_air else 0,
-                self._sim.origin_alt_m + self.altitude_m,
-                0.0,
-            )
-        if geo is None:
-            return None
+            ground_speed = math.hypot(v_north, v_east)
+            alt_amsl = self._sim.origin_alt_m + self.altitude_m
+            return telemetry.vfr_hud(s, ground_speed, self.in_air, alt_amsl)
         if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            lat, lon, alt = geo()
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_global_position_int_message(
-                boot_ms,
-                round(lat * 1e7),
-                round(lon * 1e7),
-                round(alt * 1000.0),
-                round(self.altitude_m * 1000.0),
-                round(v_north * 100.0),
-                round(v_east * 100.0),
-                0,
-                round(math.degrees(heading) * 100.0) % 36000,
-            )
+            return telemetry.global_position_int(geo(), self.altitude_m, v_north, v_east, s, t_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_GPS_RAW_INT:
-            lat, lon, alt = geo()
-            cog = math.atan2(v_east, v_north) % (2.0 * math.pi)
-            return AUTOPILOT_COMPONENT, mavlink.MAVLink_gps_raw_int_message(
-                round(t_s * 1e6),
-                mavlink.GPS_FIX_TYPE_3D_FIX,
-                round(lat * 1e7),
-                round(lon * 1e7),
-                round(alt * 1000.0),
-                80,
-                120,
-                round(ground_speed * 100.0),
-                round(math.degrees(cog) * 100.0) % 36000,
-                14,
-            )
+            return telemetry.gps_raw_int(geo(), v_north, v_east, t_s)
         return None
 
     def _ground_velocity(self) -> tuple[float, float]:
@@ -759,58 +652,19 @@ class SimVehicle:
         s = self.state
         return s.v_north_m_s + self.wind_north_m_s, s.v_east_m_s + self.wind_east_m_s
 
-    def _voltage_mv(self) -> int:
-        return round(1000.0 * (14.0 + 2.8 * self._battery_fraction))
-
     def _heartbeat(self) -> Outgoing:
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if self.armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-        status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
-        return AUTOPILOT_COMPONENT, mavlink.MAVLink_heartbeat_message(
-            mavlink.MAV_TYPE_FIXED_WING,
-            mavlink.MAV_AUTOPILOT_PX4,
-            base,
-            self.mode.custom_mode,
-            status,
-            3,
-        )
+        return AUTOPILOT_COMPONENT, telemetry.heartbeat(self.mode.custom_mode, self.armed)
 
     def _autopilot_version(self) -> Outgoing:
-        return AUTOPILOT_COMPONENT, mavlink.MAVLink_autopilot_version_message(
-            _CAPABILITIES,
-            (1 << 24) | (16 << 16) | (0 << 8) | 255,
-            0,
-            0,
-            0,
-            [0] * 8,
-            [0] * 8,
-            [0] * 8,
-            0,
-            0,
-            0x5354_4F00_0000_0000 + self.system_id,
-        )
+        return AUTOPILOT_COMPONENT, telemetry.autopilot_version(self.system_id)
 
     def _home_position(self, t_s: float) -> Outgoing:
-        lat, lon, alt = self._geodesy.to_geodetic(self.home_east_m, self.home_north_m, 0.0)
-        return AUTOPILOT_COMPONENT, mavlink.MAVLink_home_position_message(
-            round(lat * 1e7),
-            round(lon * 1e7),
-            round(alt * 1000.0),
-            self.home_north_m,
-            self.home_east_m,
-            0.0,
-            [1.0, 0.0, 0.0, 0.0],
-            0.0,
-            0.0,
-            0.0,
-            round(t_s * 1e6),
+        return AUTOPILOT_COMPONENT, telemetry.home_position(
+            *self._home_lla, self.home_east_m, self.home_north_m, t_s
         )
 
     def _statustext(self, severity: int, text: str) -> Outgoing:
-        return AUTOPILOT_COMPONENT, mavlink.MAVLink_statustext_message(
-            severity, text.encode("ascii", "replace")[:50], 0, 0
-        )
+        return AUTOPILOT_COMPONENT, telemetry.statustext(severity, text)
 
     def _ack(
         self,
@@ -819,6 +673,4 @@ class SimVehicle:
         requester: tuple[int, int],
         component: int = AUTOPILOT_COMPONENT,
     ) -> Outgoing:
-        return component, mavlink.MAVLink_command_ack_message(
-            command, result, 0, 0, requester[0], requester[1]
-        )
+        return component, telemetry.command_ack(command, result, requester)

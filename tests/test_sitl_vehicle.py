@@ -563,3 +563,20 @@ def test_no_input_breaks_the_vehicle(command, params, mask, frame, setpoint):
     assert all(math.isfinite(v) for v in (state.east_m, state.north_m, state.course_rad))
     if rig.vehicle.in_air:
         assert limits.min_speed_m_s <= state.speed_m_s <= limits.max_speed_m_s
+
+
+def test_any_stream_can_be_requested_once():
+    rig = Rig()
+    rig.ack(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    for msg_id, name in (
+        (33, "GLOBAL_POSITION_INT"),
+        (24, "GPS_RAW_INT"),
+        (31, "ATTITUDE_QUATERNION"),
+    ):
+        (_, ack), (_, message) = rig.command(mavlink.MAV_CMD_REQUEST_MESSAGE, float(msg_id))
+        assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+        assert message.get_type() == name
+    (_, ack), (_, position) = rig.command(mavlink.MAV_CMD_REQUEST_MESSAGE, 33.0)
+    start = rig.sim.vehicles[0].start
+    east, north, _ = rig.geodesy.to_local(position.lat / 1e7, position.lon / 1e7, 0.0)
+    assert (east, north) == pytest.approx((start.east_m, start.north_m), abs=0.02)
