@@ -578,5 +578,8 @@ def test_any_stream_can_be_requested_once():
         assert message.get_type() == name
     (_, ack), (_, position) = rig.command(mavlink.MAV_CMD_REQUEST_MESSAGE, 33.0)
     start = rig.sim.vehicles[0].start
-    east, north, _ = rig.geodesy.to_local(position.lat / 1e7, position.lon / 1e7, 0.0)
+    east, north, up = rig.geodesy.to_local(
+        position.lat / 1e7, position.lon / 1e7, position.alt / 1000.0
+    )
+    assert up == pytest.approx(100.0, abs=0.01)
     assert (east, north) == pytest.approx((start.east_m, start.north_m), abs=0.02)
