@@ -152,3 +152,12 @@ def test_moving_target_speed_is_relative_to_the_target():
     _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), ground)
     assert cmd.speed_m_s == pytest.approx(20.0)
     assert cmd.field_course_rad == pytest.approx(math.atan2(5.0, math.sqrt(375.0)))
+
+
+def test_a_vehicle_over_the_target_gets_a_finite_command():
+    for law in ("proposed", "frew"):
+        params = AgentParams(0, ENV, GuidanceParams(300.0, law=law))
+        _, cmd, _ = agent_step(AgentState(), _inputs(0.0, 0.0, 1.0, 20.0), params)
+        assert math.isfinite(cmd.course_rad)
+        # the field is undefined there: the vehicle keeps its course and flies out
+        assert cmd.field_course_rad == pytest.approx(1.0)

@@ -130,3 +130,15 @@ def test_initial_agent_states_are_used():
     setup = replace(_setup("sim-b"), duration_s=1.0)
     forced = run_simulation(setup, [AgentState(mode="inverse", next_switch_check_t_s=10.0)])
     assert forced.inverse[:, 0].all()
+
+
+def test_a_clockwise_orbit_is_the_mirror_image_of_sim_a():
+    setup = _setup("sim-a", orbit="cw")
+    start = setup.starts[0]
+    mirrored = replace(start, north_m=-start.north_m, course_rad=math.pi - start.course_rad)
+    result = run_simulation(replace(setup, starts=(mirrored,)))
+    reference = run_simulation(_setup("sim-a"))
+    assert result.north_m[:, 0] == pytest.approx(-reference.north_m[:, 0], abs=1e-6)
+    assert standoff_figures(result).settle_s == pytest.approx(
+        standoff_figures(reference).settle_s, abs=0.02
+    )
