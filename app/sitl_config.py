@@ -18,8 +18,14 @@ from app.config_models import (
     VehicleStartConfig,
 )
 from app.errors import ConfigError
-from sitl.config import CameraConfig, SimConfig, VehicleConfig, WindConfig, stationary_target
-from sitl.fixedwing import FixedWingState
+from sitl.config import (
+    CameraConfig,
+    SimConfig,
+    VehicleConfig,
+    WindConfig,
+    default_vehicles,
+    stationary_target,
+)
 
 Port = Annotated[int, Field(ge=1, le=65535)]
 Probability = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
@@ -155,7 +161,12 @@ class SitlScenario(StrictModel):
                     )
                 chosen = self.vehicles[: count or len(self.vehicles)]
                 return tuple(self._vehicle(v) for v in chosen)
-            return tuple(self._row_vehicle(i, count or 3) for i in range(count or 3))
+            return default_vehicles(
+                count or 3,
+                limits=self.limits.build(),
+                cruise_speed_m_s=self.limits.cruise_speed_m_s,
+                altitude_m=self.vehicle_altitude_m,
+            )
         except ValueError as exc:
             raise ConfigError(str(exc)) from exc
 
@@ -168,19 +179,4 @@ class SitlScenario(StrictModel):
             altitude_m=v.altitude_m,
             loiter_radius_m=v.loiter_radius_m,
             loiter_clockwise=v.loiter_clockwise,
-        )
-
-    def _row_vehicle(self, i: int, count: int, spacing_m: float = 100.0) -> VehicleConfig:
-        """Vehicles in a row west to east, 600 m south of the origin, flying north."""
-        half = 0.5 * (count - 1) * spacing_m
-        return VehicleConfig(
-            limits=self.limits.build(),
-            start=FixedWingState(
-                east_m=i * spacing_m - half,
-                north_m=-600.0,
-                course_rad=0.0,
-                speed_m_s=self.limits.cruise_speed_m_s,
-            ),
-            cruise_speed_m_s=self.limits.cruise_speed_m_s,
-            altitude_m=self.vehicle_altitude_m,
         )

@@ -130,19 +130,29 @@ def default_limits() -> FixedWingLimits:
     )
 
 
-def default_vehicles(count: int, spacing_m: float = 100.0) -> tuple[VehicleConfig, ...]:
-    """``count`` paper vehicles launched in a row west to east, 600 m south, flying north."""
+def default_vehicles(
+    count: int,
+    limits: FixedWingLimits | None = None,
+    cruise_speed_m_s: float = 18.0,
+    altitude_m: float = 100.0,
+    spacing_m: float = 100.0,
+) -> tuple[VehicleConfig, ...]:
+    """``count`` vehicles (the paper's by default) launched in a row west to east, 100 m
+    apart, 600 m south of the origin, flying north at cruise speed."""
     if count < 1:
         raise ValueError(f"need at least one vehicle, got {count}")
-    limits = default_limits()
     half = 0.5 * (count - 1) * spacing_m
     return tuple(
         VehicleConfig(
-            limits=limits,
+            limits=limits or default_limits(),
             start=FixedWingState(
-                east_m=i * spacing_m - half, north_m=-600.0, course_rad=0.0, speed_m_s=18.0
+                east_m=i * spacing_m - half,
+                north_m=-600.0,
+                course_rad=0.0,
+                speed_m_s=cruise_speed_m_s,
             ),
-            cruise_speed_m_s=18.0,
+            cruise_speed_m_s=cruise_speed_m_s,
+            altitude_m=altitude_m,
         )
         for i in range(count)
     )
