@@ -77,7 +77,9 @@ async def test_raw_pymavlink_client_connects_arms_and_flies_courses_within_limit
                     )
                 )
             marks = [len(c.inbox.messages) for c in clients]
+            wall_start = time.monotonic()
             await sim.wait_until(sim.time_s + 25.0)
+            wall_s = time.monotonic() - wall_start
         finally:
             stop.set()
             for client in clients:
@@ -89,6 +91,10 @@ async def test_raw_pymavlink_client_connects_arms_and_flies_courses_within_limit
         attitude = [m for m in client.inbox.messages[mark:] if m.get_type() == "ATTITUDE"]
         hud = [m for m in client.inbox.messages[mark:] if m.get_type() == "VFR_HUD"]
         assert len(attitude) > 200  # 10 Hz over 25 simulated seconds
+        # time fields are simulated time: 25 s of it went by in about 2.5 s of wall time
+        span_s = (attitude[-1].time_boot_ms - attitude[0].time_boot_ms) / 1000.0
+        assert 24.0 <= span_s <= 26.0
+        assert wall_s < 0.5 * span_s
         for before, after in itertools.pairwise(attitude):
             dt = (after.time_boot_ms - before.time_boot_ms) / 1000.0
             assert dt > 0.0
