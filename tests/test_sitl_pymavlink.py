@@ -3,6 +3,7 @@
 import asyncio
 import itertools
 import math
+import time
 
 from pymavlink.dialects.v20 import common as mavlink
 
