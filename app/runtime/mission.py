@@ -18,7 +18,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from app.adapters.bus import Bus, InProcessBroker, LinkState, Will, open_bus, topics
 from app.adapters.eventlog import EventLog
@@ -48,6 +48,7 @@ from app.runtime.ground import (
     SimulatedSensor,
     TickSource,
 )
+from app.runtime.sim_process import simulator_process
 from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState
 from sitl.server import SimulatorServer
@@ -294,8 +295,14 @@ async def run_mission(
     replay: Sequence[Measurement] = (),
     hooks: Sequence[tuple[float, Hook]] = (),
     on_snapshot: Callable[[Any], None] | None = None,
+    sim_mode: Literal["process", "inline"] = "process",
 ) -> MissionResult:
-    """Fly the plan to its end; write and return the run's results (also when interrupted)."""
+    """Fly the plan to its end; write and return the run's results (also when interrupted).
+
+    The built-in simulator (when no ``connect`` URLs are given) runs in its own process by
+    default; ``sim_mode="inline"`` runs it in this event loop, where hooks can reach it (fault
+    injection in tests) at the cost of sharing one interpreter with the mission.
+    """
     cfg = plan.config
     urls = list(connect or cfg.link.connect)
     builtin = not urls
@@ -315,8 +322,13 @@ async def run_mission(
             sim: SimulatorServer | None = None
             if builtin:
                 port = base_port if base_port is not None else cfg.sim.base_port
-                sim = await stack.enter_async_context(SimulatorServer(sim_config(plan, port)))
-                urls = [f"udpin://127.0.0.1:{e.gcs_port}" for e in sim.endpoints]
+                if sim_mode == "inline":
+                    sim = await stack.enter_async_context(SimulatorServer(sim_config(plan, port)))
+                else:
+                    await stack.enter_async_context(
+                        simulator_process(cfg, plan.count, port, out_dir)
+                    )
+                urls = [f"udpin://127.0.0.1:{port + i}" for i in range(plan.count)]
             events.emit(
                 "mission_start",
                 0.0,
