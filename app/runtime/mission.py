@@ -220,7 +220,7 @@ def observation_sources(plan: MissionPlan, replay: Sequence[Measurement] = ()) -
     return []
 
 
-async def _prepare(link: VehicleLink, plan: MissionPlan, events: EventSink) -> None:
+async def prepare_vehicle(link: VehicleLink, plan: MissionPlan, events: EventSink) -> None:
     """Health, arm, take off, first setpoint, offboard: the MAVSDK idiom, each step checked."""
     cfg = plan.config.link
     frame = await link.wait_ready(cfg.connect_timeout_s)
@@ -234,7 +234,7 @@ async def _prepare(link: VehicleLink, plan: MissionPlan, events: EventSink) -> N
     events.emit("offboard", latest.t_s, vehicle=link.vehicle_id - 1, autopilot=link.autopilot_name)
 
 
-async def _record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
+async def record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
     async for f in link.telemetry():
         writer.write(
             TlogSample(
@@ -253,7 +253,7 @@ async def _record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
         )
 
 
-async def _run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -> None:
+async def run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -> None:
     pending = sorted(hooks, key=lambda h: h[0])
     while pending:
         t = ctx.ground.state.mission_t_s
@@ -266,7 +266,7 @@ async def _run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -
 
 
 @contextlib.asynccontextmanager
-async def _vehicle_links(
+async def open_links(
     plan: MissionPlan, urls: Sequence[str], autopilot: str | None, stack: AsyncExitStack
 ) -> AsyncIterator[dict[int, VehicleLink]]:
     cfg = plan.config
@@ -337,10 +337,12 @@ async def run_mission(
                 urls=urls,
                 bus=broker_url or "in-process",
             )
-            links = await stack.enter_async_context(_vehicle_links(plan, urls, autopilot, stack))
+            links = await stack.enter_async_context(open_links(plan, urls, autopilot, stack))
             async with asyncio.TaskGroup() as tg:
                 for link in links.values():
-                    tg.create_task(_prepare(link, plan, events), name=f"prepare-{link.vehicle_id}")
+                    tg.create_task(
+                        prepare_vehicle(link, plan, events), name=f"prepare-{link.vehicle_id}"
+                    )
             broker = InProcessBroker() if broker_url is None else None
 
             async def client(name: str, will: Will | None = None) -> Bus:
@@ -394,11 +396,11 @@ async def run_mission(
                 async with asyncio.TaskGroup() as tg:
                     helpers = [tg.create_task(a.run(), name=a.name) for a in agents]
                     helpers += [
-                        tg.create_task(_record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
+                        tg.create_task(record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
                         for i, link in links.items()
                     ]
                     if hooks:
-                        helpers.append(tg.create_task(_run_hooks(hooks, ctx), name="hooks"))
+                        helpers.append(tg.create_task(run_hooks(hooks, ctx), name="hooks"))
                     await ground.run()
                     for task in helpers:
                         task.cancel()
@@ -409,11 +411,11 @@ async def run_mission(
     finally:
         # every vehicle is in hold and every log closed by now; write the run folder
         wall_s = time.monotonic() - wall_start
-        result = _write_outputs(plan, out_dir, ground, eventlog, links, wall_s, interrupted)
+        result = write_outputs(plan, out_dir, ground, eventlog, links, wall_s, interrupted)
     return result
 
 
-def _write_outputs(
+def write_outputs(
     plan: MissionPlan,
     out_dir: Path,
     ground: GroundStation | None,
