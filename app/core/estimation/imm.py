@@ -129,19 +129,30 @@ class IMMState:
     cov_scale: float = 1.0
 
     def combined(self) -> tuple[FloatArray, FloatArray]:
-        """The IMM output (Appendix B step 4): mean (6,) and covariance (6, 6)."""
+        """The IMM output (Appendix B step 4): mean (6,) and covariance (6, 6).
+
+        For a filter holding a federated share the model covariances are in share form and the
+        spread of the means is not scaled: scaling it too (the exact share of the combined
+        covariance) makes the Frobenius-norm shares beta_i swing with the model disagreement,
+        which measured worse (docs/estimation.md)."""
         return combine(self.x, self.p, self.mu)
 
 
-def combine(x: FloatArray, p: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:
+def combine(
+    x: FloatArray, p: FloatArray, mu: FloatArray, spread_scale: float = 1.0
+) -> tuple[FloatArray, FloatArray]:
     """Moment-matched mixture: X = sum mu_j X_j, P = sum mu_j (P_j + d_j d_j^T) (Appendix B (4)).
 
-    ``x`` (r, 6), ``p`` (r, 6, 6), ``mu`` (r,); returns new arrays (6,) and (6, 6).
+    ``x`` (r, 6), ``p`` (r, 6, 6), ``mu`` (r,); returns new arrays (6,) and (6, 6). The spread
+    term is multiplied by ``spread_scale`` (a federated share's beta^-1).
     """
     mean = mu @ x
     d = x - mean
     r, n = x.shape
-    cov = (mu @ p.reshape(r, n * n)).reshape(n, n) + (d.T * mu) @ d
+    spread = (d.T * mu) @ d
+    if spread_scale != 1.0:
+        spread = spread * spread_scale
+    cov = (mu @ p.reshape(r, n * n)).reshape(n, n) + spread
     return mean, 0.5 * (cov + cov.T)
 
 
