@@ -61,6 +61,15 @@ def _raw(data: ScenarioData, sensor: str | None) -> Row:
     return float(np.sqrt(np.mean(sq))), turn, float("nan")
 
 
+def _column_means(rows: list[Row]) -> Row:
+    """Mean of each column over seeds, ignoring NaN (a figure the scenario has not)."""
+    out = []
+    for k in range(3):
+        values = [r[k] for r in rows if not np.isnan(r[k])]
+        out.append(float(np.mean(values)) if values else float("nan"))
+    return out[0], out[1], out[2]
+
+
 def _averaged(data: ScenarioData) -> list[Observation]:
     """One fix per period: the mean of the sensors' fixes at their mean time."""
     n = len({o.sensor for o in data.observations})
@@ -114,7 +123,9 @@ def accuracy(name: str, params: FederatedParams, seeds: Sequence[int], all_modes
         central = run_centralised(data.observations, params.local).fused
         c_err = errors(central.t_s, central.x, data.truth_t_s, data.truth, data.segments, central.p)
         put("centralised IMM-UKF", _row(c_err), time.perf_counter() - start)
-        nees["centralised"].append(float(np.mean(c_err.nees[c_err.mask_for("straight")])))
+        straight = c_err.mask_for("straight")
+        if straight.any():
+            nees["centralised"].append(float(np.mean(c_err.nees[straight])))
         for mode in modes:
             p = replace(params, main=replace(params.main, feedback=mode))
             start = time.perf_counter()
@@ -123,7 +134,7 @@ def accuracy(name: str, params: FederatedParams, seeds: Sequence[int], all_modes
             fused = run.fused
             f_err = errors(fused.t_s, fused.x, data.truth_t_s, data.truth, data.segments, fused.p)
             put(f"federated, feedback {mode}", _row(f_err), seconds)
-            if mode == "modewise":
+            if mode == "modewise" and f_err.mask_for("straight").any():
                 nees["federated modewise"].append(
                     float(np.mean(f_err.nees[f_err.mask_for("straight")]))
                 )
@@ -139,21 +150,20 @@ def accuracy(name: str, params: FederatedParams, seeds: Sequence[int], all_modes
                 put(f"local IMM-UKF alone, sensor {sensor}", _row(e))
     print(f"-- {name}: mean over {len(seeds)} seeds")
     print(header)
-    means = {
-        label: tuple(float(np.nanmean([r[k] for r in rows])) for k in range(3))
-        for label, rows in table.items()
-    }
+    means = {label: _column_means(rows) for label, rows in table.items()}
     for label, (a, b, c) in means.items():
         print(f"{label:<32} {a:>10.3f} {b:>9.3f} {c:>8.3f}")
     lo, hi = nees_band(len(seeds))
     for label, values in nees.items():
+        if not values:
+            continue
         print(
             f"mean NEES [x, vx, y, vy] on straight legs, {label}: {np.mean(values):.2f} "
             f"(95% band of the {len(seeds)}-run average, 4 dof: [{lo:.2f}, {hi:.2f}])"
         )
     return {
         "means": means,
-        "nees": {k: float(np.mean(v)) for k, v in nees.items()},
+        "nees": {k: float(np.mean(v)) for k, v in nees.items() if v},
         "band": (lo, hi),
         "table": table,
     }
