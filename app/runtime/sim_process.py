@@ -17,12 +17,12 @@ import sys
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
 
-from app.cli.sitl import serve
 from app.errors import LinkError
 from app.mission_config import MissionConfig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from app.cli.sitl import serve  # the `standoff sitl` server loop (signals, endpoints)
     from app.runtime.mission import build_plan, sim_config
 
     parser = argparse.ArgumentParser(prog="python -m app.runtime.sim_process")

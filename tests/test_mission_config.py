@@ -1,0 +1,72 @@
+import math
+
+import pytest
+
+from app.config import load_config, validate_config
+from app.errors import ConfigError
+from app.mission_config import MissionConfig
+from app.runtime.mission import build_plan, sim_config
+
+MISSIONS = ("hil", "px4-sitl", "ardupilot-sitl", "phase-mission")
+
+
+@pytest.mark.parametrize("name", MISSIONS)
+def test_shipped_missions_validate_and_build(name):
+    config = load_config(name, MissionConfig)
+    plan = build_plan(config)
+    assert plan.count == config.vehicles == 3
+    assert plan.end_t_s > config.tracking_command_s
+    for i, agent in enumerate(plan.agents):
+        assert agent.vehicle == i
+        assert agent.agent.guidance.radius_m == config.radius_m
+        assert agent.track is not None
+        assert not agent.track.guidance.uses_inverse_field
+
+
+def test_the_default_mission_is_the_papers_section_5_2():
+    config = load_config("hil", MissionConfig)
+    assert (config.radius_m, config.limits.cruise_speed_m_s) == (90.0, 14.0)
+    assert (config.limits.min_speed_m_s, config.limits.max_speed_m_s) == (10.0, 18.0)
+    plan = build_plan(config)
+    assert plan.target.labels == ("wait", "A-B", "B-C", "C-D")
+    times: dict[str, list[float]] = {label: [] for label in plan.target.labels}
+    t = 0.0
+    while t < plan.target.duration_s:
+        times[plan.target.segment_at(t)].append(t)
+        t += 0.5
+    for label, speed in (("A-B", 7.0), ("B-C", 3.0)):
+        middle = times[label][len(times[label]) // 2]
+        assert plan.target.state_at(middle).speed_m_s == pytest.approx(speed)
+    assert plan.target.state_at(plan.target.duration_s + 1.0).speed_m_s == 0.0  # stopped at D
+    standby = math.hypot(config.standby.east_m, config.standby.north_m)
+    assert standby == pytest.approx(1000.0)  # the team loiters 1 km from A
+
+
+def test_the_simulator_launches_the_team_on_the_standby_circle():
+    plan = build_plan(load_config("hil", MissionConfig))
+    sim = sim_config(plan, base_port=30000)
+    assert len(sim.vehicles) == 3
+    for v in sim.vehicles:
+        r = math.hypot(v.start.east_m + 1000.0, v.start.north_m)
+        assert r == pytest.approx(150.0)
+    assert sim.target is plan.target
+
+
+BASE = load_config("hil", MissionConfig).model_dump()
+
+
+@pytest.mark.parametrize(
+    ("patch", "needle"),
+    [
+        ({"standby": {"east_m": 0.0, "north_m": 0.0, "radius_m": 20.0}}, "standby.radius_m"),
+        ({"guidance": {"law": "fixed"}}, "needs c"),
+        ({"observations": {"source": "replay"}}, "replay_file"),
+        ({"vehicles": 0}, "vehicles"),
+        ({"radius_m": -5.0}, "radius_m"),
+        ({"colour": "red"}, "colour"),
+        ({"link": {"autopilot": "betaflight"}}, "link.autopilot"),
+    ],
+)
+def test_bad_missions_are_refused_with_the_field(patch, needle):
+    with pytest.raises(ConfigError, match=needle):
+        validate_config({**BASE, **patch}, MissionConfig, source="m.toml")
