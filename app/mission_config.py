@@ -113,7 +113,7 @@ class LinkSettings(StrictModel):
 class SimSettings(StrictModel):
     """The built-in simulator when no ``connect`` URLs are given."""
 
-    speedup: Positive = 6.0
+    speedup: Positive = 3.0
     seed: Annotated[int, Field(ge=0)] = 1
     base_port: Annotated[int, Field(ge=1024, le=65000)] = 14540
     physics_dt_s: Annotated[float, Field(gt=0.0, le=0.1)] = 0.02
