@@ -180,3 +180,23 @@ def test_malformed_estimate_dicts_raise_input_error():
         LocalEstimate.from_dict({**good, "p": [[math.nan] * 6] * 6})
     with pytest.raises(InputError, match="beta"):
         GlobalEstimate.from_dict({"t_s": 1.0, "x": [0.0] * 6, "p": np.eye(6).tolist()})
+
+
+@pytest.mark.parametrize("mode", ["modewise", "mixture", "reset"])
+def test_an_allocation_older_than_the_local_filter_is_carried_forward(mode):
+    imm = default_imm_params()
+    local = LocalParams(imm=imm)
+    main = MainParams(imm=imm, feedback=mode)
+    state = LocalState("1")
+    for o in _track(90)[::3]:
+        state, _ = local_step(state, o, local)
+    est = state.estimate()
+    assert est is not None
+    fused = fuse([est], est.t_s - 0.5, main)
+    assert fused is not None
+    fed = apply_feedback(state, fused, local, main)
+    assert fed.imm is not None
+    assert state.imm is not None
+    assert fed.imm.t_s == state.imm.t_s
+    assert all(is_spd(p) for p in fed.imm.p)
+    assert fed.counters.feedback == 1
