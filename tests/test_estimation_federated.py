@@ -2,6 +2,7 @@
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -200,3 +201,29 @@ def test_an_allocation_older_than_the_local_filter_is_carried_forward(mode):
     assert fed.imm.t_s == state.imm.t_s
     assert all(is_spd(p) for p in fed.imm.p)
     assert fed.counters.feedback == 1
+
+
+def test_a_late_allocation_replays_the_newer_observations():
+    """An allocation of the filter's own state at an earlier time, arriving late, gives back
+    the filter's current state: the observations since are replayed, not lost."""
+    imm = default_imm_params()
+    local = LocalParams(imm=imm)
+    main = MainParams(imm=imm)
+    obs = _track(150)[::3]
+    state = LocalState("1")
+    for o in obs[:40]:
+        state, _ = local_step(state, o, local)
+    earlier = state.estimate()
+    assert earlier is not None
+    for o in obs[40:45]:
+        state, _ = local_step(state, o, local)
+    fused = fuse([earlier], earlier.t_s, main)
+    assert fused is not None
+    fed = apply_feedback(state, fused, local, main)
+    assert fed.imm is not None
+    assert state.imm is not None
+    assert fed.imm.t_s == state.imm.t_s
+    np.testing.assert_allclose(fed.imm.x, state.imm.x, atol=1e-8)
+    np.testing.assert_allclose(fed.imm.p, state.imm.p, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(fed.imm.mu, state.imm.mu, atol=1e-9)
+    assert fed.counters == replace(state.counters, feedback=1)

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from app.core.estimation.imm import IMMParams, IMMState, combine, imm_predict
 from app.core.estimation.linalg import robust_cholesky, symmetrise
-from app.core.estimation.local import LocalParams, LocalState
+from app.core.estimation.local import LocalParams, LocalState, local_step
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
 from app.core.estimation.models import MotionModel
 
@@ -269,8 +269,8 @@ def apply_feedback(
 ) -> LocalState:
     """Information allocation (Appendix A (1)) to one local filter, per ``main_params.feedback``.
 
-    ``"modewise"``: the local filter takes the fused models' shares and mode probabilities
-    (carried forward with its IMM if it is already past the fused time). ``"reset"`` and
+    ``"modewise"``: the local filter takes the fused models' shares and mode probabilities; if
+    it has used observations newer than the fused time, they are replayed on top. ``"reset"`` and
     ``"mixture"``: the local filter is first brought to the fused time (an IMM prediction), or
     the fused estimate is carried forward with the time-update model if the filter is past it.
     A filter that was not part of the fusion (no share), or mode ``"none"``, is returned as is.
@@ -290,27 +290,37 @@ def apply_feedback(
         new_imm = IMMState(
             fused.t_s, np.array(fused.model_x), np.asarray(fused.model_p) / beta, fused.mu, scale
         )
-        if imm.t_s > fused.t_s:
+        newer = tuple(o for o in local.recent if o.t_s > fused.t_s)
+        if newer:
+            # the allocation predates observations this filter has used: take the allocation
+            # and replay them on top (counted once, when they first came)
+            replayed = LocalState(local.sensor, new_imm)
+            for obs in sorted(newer, key=lambda o: o.t_s):
+                replayed, _ = local_step(replayed, obs, local_params)
+            assert replayed.imm is not None
+            new_imm = replayed.imm
+        if new_imm.t_s < imm.t_s:
             new_imm = imm_predict(new_imm, imm.t_s, local_params.imm)
+        counters = replace(local.counters, feedback=local.counters.feedback + 1)
+        return replace(local, imm=new_imm, counters=counters, recent=newer)
+    x_g, p_g = np.asarray(fused.x), np.asarray(fused.p)
+    if imm.t_s < fused.t_s:
+        imm = imm_predict(imm, fused.t_s, local_params.imm)
+    elif imm.t_s > fused.t_s:
+        x_g, p_g = time_update(
+            x_g, p_g, imm.t_s - fused.t_s, main_params.time_update, imm.cov_scale
+        )
+    target_p = p_g / beta
+    if main_params.feedback == "reset":
+        xs = np.tile(x_g, (r, 1))
+        ps = np.tile(target_p, (r, 1, 1))
     else:
-        x_g, p_g = np.asarray(fused.x), np.asarray(fused.p)
-        if imm.t_s < fused.t_s:
-            imm = imm_predict(imm, fused.t_s, local_params.imm)
-        elif imm.t_s > fused.t_s:
-            x_g, p_g = time_update(
-                x_g, p_g, imm.t_s - fused.t_s, main_params.time_update, imm.cov_scale
-            )
-        target_p = p_g / beta
-        if main_params.feedback == "reset":
-            xs = np.tile(x_g, (r, 1))
-            ps = np.tile(target_p, (r, 1, 1))
-        else:
-            x_i, p_i = imm.combined()
-            l_target = robust_cholesky(target_p)
-            l_local = robust_cholesky(p_i)
-            t = np.linalg.solve(l_local.T, l_target.T).T  # T = L_t L_i^-1
-            xs = x_g + (imm.x - x_i) @ t.T
-            ps = symmetrise(t @ imm.p @ t.T)
-        new_imm = IMMState(imm.t_s, xs, ps, imm.mu, scale)
+        x_i, p_i = imm.combined()
+        l_target = robust_cholesky(target_p)
+        l_local = robust_cholesky(p_i)
+        t = np.linalg.solve(l_local.T, l_target.T).T  # T = L_t L_i^-1
+        xs = x_g + (imm.x - x_i) @ t.T
+        ps = symmetrise(t @ imm.p @ t.T)
+    new_imm = IMMState(imm.t_s, xs, ps, imm.mu, scale)
     counters = replace(local.counters, feedback=local.counters.feedback + 1)
     return replace(local, imm=new_imm, counters=counters)

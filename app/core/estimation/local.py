@@ -30,6 +30,9 @@ from app.core.estimation.models import STATE_DIM
 
 FloatArray = NDArray[np.float64]
 
+RECENT_KEPT = 20
+"""How many used observations a local filter keeps for replay after a late allocation."""
+
 Outcome = Literal["initialised", "updated", "late", "stale", "invalid", "gated", "restarted"]
 
 
@@ -119,12 +122,16 @@ class LocalState:
         Running counts of outcomes.
     consecutive_gated
         Gated observations since the last accepted one.
+    recent
+        The last few observations this filter used (at most ``RECENT_KEPT``), so that a
+        federated allocation older than the filter can be applied and these replayed on top.
     """
 
     sensor: str
     imm: IMMState | None = None
     counters: FilterCounters = field(default_factory=FilterCounters)
     consecutive_gated: int = 0
+    recent: tuple[Observation, ...] = ()
 
     @property
     def t_s(self) -> float | None:
@@ -209,7 +216,7 @@ def local_step(
     r = _noise(obs, params)
     z = np.array([obs.east_m, obs.north_m])
     if state.imm is None:
-        new = replace(state, imm=_start(obs, r, params), consecutive_gated=0)
+        new = replace(state, imm=_start(obs, r, params), consecutive_gated=0, recent=(obs,))
         return new, StepReport("initialised")
 
     lag = state.imm.t_s - obs.t_s
@@ -229,7 +236,7 @@ def local_step(
         if lag <= 0.0 and state.consecutive_gated + 1 >= params.max_consecutive_gated:
             counters = replace(counters, restarts=counters.restarts + 1)
             fresh = _start(obs, _noise(obs, params), params)
-            new = replace(state, imm=fresh, counters=counters, consecutive_gated=0)
+            new = replace(state, imm=fresh, counters=counters, consecutive_gated=0, recent=(obs,))
             return new, StepReport("restarted", "track lost: too many gated observations", nis)
         counters = replace(counters, gated=counters.gated + 1)
         reason = f"innovation NIS {nis:.3g} above the gate {params.gate_nis:g}"
@@ -243,7 +250,8 @@ def local_step(
     else:
         counters = replace(counters, updated=counters.updated + 1)
         outcome = "updated"
-    new = replace(state, imm=result.state, counters=counters, consecutive_gated=0)
+    recent = (*state.recent[-(RECENT_KEPT - 1) :], obs)
+    new = replace(state, imm=result.state, counters=counters, consecutive_gated=0, recent=recent)
     return new, StepReport(outcome, "", nis)
 
 
