@@ -4,6 +4,10 @@ Mission time is the vehicles' own time, as their statuses carry it: the newest s
 A vehicle whose newest status is more than ``lost_after_s`` of mission time behind (it stopped
 answering), or that reports its link lost or itself unhealthy, leaves the active team; it rejoins
 when it reports healthy again. No wall clock is read, so the logic is the same at any speed-up.
+
+When the local estimates stop (no observations: every camera lost the target), the fused
+estimate coasts: it is predicted forward at constant velocity with a growing covariance, so the
+team keeps orbiting where the target should be.
 """
 
 import math
@@ -15,8 +19,10 @@ from app.core.estimation.federated import (
     main_allocate,
     main_fuse,
     main_receive,
+    time_update,
 )
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
+from app.core.estimation.models import MotionModel
 from app.core.frames import TAU
 from app.core.stage import Stage, StageParams, StageState, TeamView, next_stage
 
@@ -38,7 +44,11 @@ class VehicleReport:
 class GroundParams:
     """``vehicles``: the team as launched (ids). ``tracking_command_t_s``: when the team is
     sent from standby to track (mission time). ``fuse_period_s``: how often the main filter
-    fuses. ``lost_after_s``: mission-time silence after which a vehicle leaves the team."""
+    fuses. ``lost_after_s``: mission-time silence after which a vehicle leaves the team.
+    ``coast_after_s``: once no local estimate has arrived for this long, the fused estimate is
+    predicted with ``coast_model`` instead of fused (constant velocity: the acceleration last
+    estimated is not extrapolated, which would take the predicted target off at ever higher
+    speed; the acceleration states are held)."""
 
     vehicles: tuple[int, ...]
     radius_m: float
@@ -47,11 +57,13 @@ class GroundParams:
     stages: StageParams = field(default_factory=StageParams)
     fuse_period_s: float = 0.2
     lost_after_s: float = 2.0
+    coast_after_s: float = 1.0
+    coast_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
 
     def __post_init__(self) -> None:
         if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
             raise ValueError(f"vehicles must be unique and non-empty, got {self.vehicles}")
-        for name in ("radius_m", "fuse_period_s", "lost_after_s"):
+        for name in ("radius_m", "fuse_period_s", "lost_after_s", "coast_after_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -68,6 +80,7 @@ class GroundState:
     stage: StageState = field(default_factory=StageState)
     mission_t_s: float = -math.inf
     next_fuse_t_s: float = -math.inf
+    last_local_t_s: float = -math.inf  # time of the newest local estimate received
 
     def report(self, vehicle: int) -> VehicleReport | None:
         return dict(self.reports).get(vehicle)
@@ -93,7 +106,27 @@ def hear_status(state: GroundState, vehicle: int, report: VehicleReport) -> Grou
 
 
 def hear_local(state: GroundState, estimate: LocalEstimate) -> GroundState:
-    return replace(state, main=main_receive(state.main, estimate))
+    return replace(
+        state,
+        main=main_receive(state.main, estimate),
+        last_local_t_s=max(state.last_local_t_s, estimate.t_s),
+    )
+
+
+def coast(fused: GlobalEstimate, t_s: float, model: MotionModel) -> GlobalEstimate:
+    """The fused estimate predicted to ``t_s`` with no new information: F x, F P F^T + Q
+    (per model too, when the fusion was model by model); the shares are kept."""
+    dt = t_s - fused.t_s
+    if dt <= 0.0:
+        return fused
+    x, p = time_update(fused.x, fused.p, dt, model)
+    model_x, model_p = fused.model_x, fused.model_p
+    if model_x is not None and model_p is not None:
+        f, q = model.transition(dt), model.process_noise(dt)
+        model_x = model_x @ f.T
+        model_p = f @ model_p @ f.T + q
+        model_p = 0.5 * (model_p + model_p.swapaxes(-1, -2))
+    return replace(fused, t_s=float(t_s), x=x, p=p, model_x=model_x, model_p=model_p)
 
 
 def _active(state: GroundState, params: GroundParams) -> tuple[int, ...]:
@@ -145,7 +178,10 @@ def tick(
     state = replace(state, active=active)
     fused = None
     if t >= state.next_fuse_t_s:
-        fused = main_fuse(state.main, t, params.main)
+        if state.fused is not None and t - state.last_local_t_s > params.coast_after_s:
+            fused = coast(state.fused, t, params.coast_model)
+        else:
+            fused = main_fuse(state.main, t, params.main)
         main = state.main if fused is None else main_allocate(state.main, fused, params.main)
         state = replace(
             state,
@@ -170,6 +206,7 @@ __all__ = [
     "GroundState",
     "Stage",
     "VehicleReport",
+    "coast",
     "desired_spacing_rad",
     "hear_local",
     "hear_status",
