@@ -1,0 +1,104 @@
+"""``standoff agent --vehicle I [CONFIG] --broker URL``: one vehicle's agent as its own process."""
+
+import argparse
+import asyncio
+import sys
+from pathlib import Path
+
+from app.adapters.vehicle.mavsdk_link import validate_url
+from app.cli.fly import DEFAULT_CONFIG
+from app.cli.ground import broker_url
+from app.config import load_config
+from app.errors import ConfigError
+from app.mission_config import MissionConfig
+from app.runtime.distributed import agent_url, run_agent
+from app.runtime.mission import build_plan
+
+ORDER = 13
+
+
+def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    p = subparsers.add_parser(
+        "agent",
+        help="one vehicle's agent, for a ground station in another process (MQTT)",
+        description=(
+            "Fly one vehicle of a mission as its own process (as on the vehicle's onboard "
+            "computer): connect to it over MAVLink, take off, start offboard control and run "
+            "its agent (local estimator, guidance, phase keeping) with the ground station and "
+            "the other agents over an MQTT broker. Stops when the ground station sends "
+            "'shutdown', or on SIGINT/SIGTERM; either way the vehicle is left in hold. Writes "
+            "vehicle-<I+1>.tlog, events-agent-<I>.jsonl and agent-<I>.json to --out."
+        ),
+    )
+    p.add_argument(
+        "--vehicle",
+        type=int,
+        required=True,
+        metavar="I",
+        help="which vehicle, 0-based (MAVLink system id I+1)",
+    )
+    p.add_argument(
+        "config",
+        nargs="?",
+        default=DEFAULT_CONFIG,
+        help="mission config: a name in configs/ or a path (default: hil)",
+    )
+    p.add_argument(
+        "--broker",
+        metavar="URL",
+        help="MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')",
+    )
+    p.add_argument(
+        "--connect",
+        metavar="URL",
+        help=(
+            "the vehicle's MAVSDK URL (udpin://, udpout://, tcp://, serial://); default: the "
+            "config's URL for this vehicle, else the built-in simulator's port base-port + I"
+        ),
+    )
+    p.add_argument(
+        "--base-port", type=int, help="built-in simulator's first UDP port (default: the config's)"
+    )
+    p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        help="folder for the tlog and logs (default: runs/<name>-agent-<I>); the ground's "
+        "run folder keeps a mission together",
+    )
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    config = load_config(args.config, MissionConfig)
+    url = broker_url(args, config)
+    if args.vehicles is not None and not 1 <= args.vehicles <= 50:
+        raise ConfigError(f"--vehicles {args.vehicles} is out of range 1..50")
+    if args.base_port is not None and not 1024 <= args.base_port <= 65000:
+        raise ConfigError(f"--base-port {args.base_port} is out of range 1024..65000")
+    plan = build_plan(config, args.vehicles)
+    vehicle: int = args.vehicle
+    connect = validate_url(agent_url(plan, vehicle, args.connect, args.base_port))
+    builtin = args.connect is None and not config.link.connect
+    out = args.out or Path("runs") / f"{config.name}-agent-{vehicle}"
+
+    def notify(line: str) -> None:
+        print(f"standoff agent: {line}", flush=True)
+
+    result = asyncio.run(
+        run_agent(plan, vehicle, url, connect, out, builtin_simulator=builtin, notify=notify)
+    )
+    if result.stopped_by is not None:
+        notify(
+            f"agent {vehicle}: stopped by {result.stopped_by.name}; vehicle {vehicle + 1} in hold"
+        )
+        return 128 + int(result.stopped_by)
+    if result.reason != "shutdown":
+        print(
+            f"standoff agent: error: agent {vehicle}: {result.reason}; vehicle {vehicle + 1}"
+            " left in hold",
+            file=sys.stderr,
+        )
+        return 1
+    notify(f"agent {vehicle}: shutdown by the ground station; vehicle {vehicle + 1} in hold")
+    return 0

@@ -1,0 +1,531 @@
+"""The mission as separate processes over MQTT: one ground station, one agent per vehicle.
+
+``run_ground`` is the ground-station process (``standoff ground``): its bus client ``ground``,
+optionally the built-in simulator beside it, the ``GroundStation`` until mission time reaches the
+end, then a ``shutdown`` command to every agent and the run folder (summary, track, plots, the
+ground's events). ``run_agent`` is one vehicle's process (``standoff agent --vehicle I``): its
+bus client ``agent-I`` (last will: ``LinkState(online=False)``), a MAVSDK link to that vehicle
+alone, the same ``prepare_vehicle`` and ``VehicleAgent`` that ``standoff fly`` runs, its own
+``vehicle-{I+1}.tlog``, ``events-agent-I.jsonl`` and ``agent-I.json``. An agent stops on the
+ground's ``shutdown`` or on SIGINT/SIGTERM; either way its vehicle is put in hold (the link does
+that when it closes) and it says ``LinkState(online=False)`` before leaving the bus. A second
+signal to either process stops it at once (still closing its logs).
+"""
+
+import asyncio
+import contextlib
+import dataclasses
+import json
+import logging
+import math
+import signal
+import time
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Sequence
+from contextlib import AsyncExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from app.adapters.bus import (
+    BrokerUrl,
+    Bus,
+    Command,
+    LinkState,
+    Subscription,
+    Will,
+    open_bus,
+    topics,
+)
+from app.adapters.eventlog import EventLog
+from app.adapters.live_view import MissionSnapshot
+from app.adapters.tlog import TlogWriter
+from app.adapters.vehicle.link import GeodeticOrigin, VehicleLink
+from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.errors import BusError, ConfigError, StandoffError
+from app.runtime.agent import AgentRuntimeParams, VehicleAgent
+from app.runtime.events import EventSink, LoggingSink
+from app.runtime.ground import GroundRuntimeParams, GroundStation, Measurement
+from app.runtime.mission import (
+    MissionPlan,
+    MissionResult,
+    observation_sources,
+    prepare_vehicle,
+    record_tlog,
+    write_outputs,
+)
+from app.runtime.sim_process import simulator_process
+
+log = logging.getLogger(__name__)
+
+GROUND_CLIENT = "ground"
+SHUTDOWN_GRACE_S = 15.0  # wall time the ground waits for the agents to hold and go offline
+
+Notify = Callable[[str], None]
+
+
+def _quiet(_line: str) -> None:
+    return None
+
+
+# --- stopping: the end of the mission, a shutdown command, or a signal ---------------------------
+
+
+class StopFlag:
+    """Why a process should stop: set once (the first reason wins); awaitable."""
+
+    def __init__(self) -> None:
+        self.reason = ""
+        self.signum: signal.Signals | None = None
+        self._event = asyncio.Event()
+
+    @property
+    def is_set(self) -> bool:
+        return self._event.is_set()
+
+    def set(self, reason: str) -> None:
+        if not self._event.is_set():
+            self.reason = reason
+            self._event.set()
+
+    async def wait(self) -> str:
+        await self._event.wait()
+        return self.reason
+
+
+@contextlib.contextmanager
+def stop_on_signals(stop: StopFlag) -> Iterator[None]:
+    """SIGINT/SIGTERM set ``stop`` (an orderly stop); a second one cancels the current task."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    signals = (signal.SIGINT, signal.SIGTERM)
+
+    def on_signal(signum: signal.Signals) -> None:
+        if stop.is_set and stop.signum is not None and task is not None:
+            log.warning("second %s: stopping at once", signum.name)
+            task.cancel()
+            return
+        stop.signum = signum
+        stop.set(signum.name)
+
+    for signum in signals:
+        loop.add_signal_handler(signum, on_signal, signum)
+    try:
+        yield
+    finally:
+        for signum in signals:
+            loop.remove_signal_handler(signum)
+
+
+def _first_error(group: BaseExceptionGroup[Any]) -> BaseException:
+    """The first leaf of an exception group (what a task group's caller wants to report)."""
+    first: BaseException = group
+    while isinstance(first, BaseExceptionGroup):
+        first = first.exceptions[0]
+    return first
+
+
+@contextlib.asynccontextmanager
+async def _plain_errors() -> AsyncIterator[None]:
+    """Re-raise the project's own error out of a task group's exception group, as itself."""
+    try:
+        yield
+    except BaseExceptionGroup as group:
+        first = _first_error(group)
+        if isinstance(first, StandoffError | asyncio.CancelledError | KeyboardInterrupt):
+            raise first from group
+        raise
+
+
+def _broker_name(url: str) -> str:
+    """The broker URL without its password (for logs and the event file)."""
+    return str(BrokerUrl.parse(url))
+
+
+# --- the ground station -----------------------------------------------------------------------
+
+
+class TeamPresence:
+    """Which agents are on the bus, from their ``LinkState`` messages (and last wills).
+
+    An agent that started before the ground station subscribed announced itself unheard;
+    ``expect`` adds the vehicles the station has heard from (their statuses) to the online set.
+    """
+
+    def __init__(self, events: EventSink) -> None:
+        self.online: set[int] = set()
+        self.offline: set[int] = set()
+        self.seen: set[int] = set()
+        self._events = events
+        self._changed = asyncio.Event()
+
+    async def watch(self, subscription: Subscription) -> None:
+        async for _topic, message in subscription:
+            if not isinstance(message, LinkState) or message.vehicle is None:
+                continue
+            v = message.vehicle
+            self.seen.add(v)
+            if message.online:
+                self.online.add(v)
+                self.offline.discard(v)
+            else:
+                self.online.discard(v)
+                self.offline.add(v)
+            self._events.emit(
+                "agent_online" if message.online else "agent_offline",
+                message.t_s,
+                vehicle=v,
+                sender=message.sender,
+                reason=message.reason,
+            )
+            self._changed.set()
+
+    def expect(self, vehicles: Iterable[int]) -> None:
+        """Count ``vehicles`` as online unless they last said they were going offline."""
+        heard = set(vehicles) - self.offline
+        self.seen |= heard
+        self.online |= heard
+
+    async def all_offline(self) -> None:
+        while self.online:
+            self._changed.clear()
+            await self._changed.wait()
+
+
+async def run_ground(
+    plan: MissionPlan,
+    out_dir: Path,
+    broker_url: str,
+    *,
+    sitl_base_port: int | None = None,
+    replay: Sequence[Measurement] = (),
+    on_snapshot: Callable[[MissionSnapshot], None] | None = None,
+    notify: Notify = _quiet,
+    shutdown_grace_s: float = SHUTDOWN_GRACE_S,
+) -> MissionResult:
+    """The ground-station process: run the mission to its end, stop the agents, write the run.
+
+    ``sitl_base_port``: also run the built-in simulator for the plan on these UDP ports (the
+    agents then connect to ``udpin://127.0.0.1:{port + i}``). Without it the vehicles and their
+    agents are elsewhere. The simulated truth (for the summary's errors) is the plan's target
+    path when the vehicles are the built-in simulator (``--sitl``, or a config without
+    ``connect`` URLs) or when the ground simulates the observations. Returns the results, also
+    when stopped by a signal (``interrupted``).
+    """
+    cfg = plan.config
+    builtin = sitl_base_port is not None or not cfg.link.connect
+    eventlog = EventLog(out_dir / "events.jsonl")
+    ground: GroundStation | None = None
+    interrupted = False
+    stop = StopFlag()
+    wall_start = time.monotonic()
+    try:
+        async with AsyncExitStack() as stack:
+            stack.enter_context(eventlog)
+            stack.enter_context(stop_on_signals(stop))
+            events: EventSink = LoggingSink(eventlog)
+            will = Will(
+                topics.link(GROUND_CLIENT),
+                LinkState(sender=GROUND_CLIENT, t_s=0.0, online=False, reason="vanished"),
+            )
+            bus = await stack.enter_async_context(
+                open_bus(broker_url, client_id=GROUND_CLIENT, will=will)
+            )
+            presence = TeamPresence(events)
+            link_states = await stack.enter_async_context(bus.subscribe(topics.ALL_LINKS))
+            if sitl_base_port is not None:
+                await stack.enter_async_context(
+                    simulator_process(cfg, plan.count, sitl_base_port, out_dir)
+                )
+                ports = f"{sitl_base_port}..{sitl_base_port + plan.count - 1}"
+                notify(f"built-in simulator running: {plan.count} vehicles on UDP ports {ports}")
+            await bus.publish(
+                topics.link(GROUND_CLIENT), LinkState(sender=GROUND_CLIENT, t_s=0.0, online=True)
+            )
+            events.emit(
+                "mission_start",
+                0.0,
+                name=cfg.name,
+                vehicles=plan.count,
+                bus=_broker_name(broker_url),
+                simulator=sitl_base_port,
+            )
+            ground = GroundStation(
+                plan.ground,
+                GroundRuntimeParams(end_t_s=plan.end_t_s),
+                bus,
+                events,
+                truth=plan.target if builtin or cfg.observations.source == "simulated" else None,
+                sources=observation_sources(plan, replay),
+                external_observations=cfg.observations.external_topic
+                if cfg.observations.source == "external"
+                else None,
+                on_snapshot=on_snapshot,
+                name=GROUND_CLIENT,
+            )
+            notify(f"ground station ready on {_broker_name(broker_url)}: waiting for the agents")
+            shutdown = _Shutdown(bus, ground, presence, events, notify)
+            try:
+                async with _plain_errors(), asyncio.TaskGroup() as tg:
+                    watcher = tg.create_task(presence.watch(link_states), name="ground-presence")
+                    station = tg.create_task(ground.run(), name="ground-station")
+                    station.add_done_callback(lambda _t: stop.set("mission complete"))
+                    reason = await stop.wait()
+                    interrupted = not station.done()
+                    station.cancel()
+                    if interrupted:
+                        events.emit("interrupted", _mission_t(ground), reason=reason)
+                    await shutdown.send()
+                    await shutdown.wait_offline(shutdown_grace_s)
+                    watcher.cancel()
+            finally:
+                if not shutdown.sent:  # the station failed or a second signal: still stop them
+                    with contextlib.suppress(BusError, TimeoutError):
+                        async with asyncio.timeout(2.0):
+                            await shutdown.send()
+    finally:
+        # the agents hold their vehicles and the simulator is stopped; write the run folder
+        wall_s = time.monotonic() - wall_start
+        result = write_outputs(plan, out_dir, ground, eventlog, {}, wall_s, interrupted)
+    return result
+
+
+def _mission_t(ground: GroundStation) -> float:
+    """Mission time so far; 0 before the first status (the state's time is -inf then)."""
+    t = ground.state.mission_t_s
+    return t if math.isfinite(t) else 0.0
+
+
+class _Shutdown:
+    """The end of a mission for the team: a ``shutdown`` command (QoS 1) to every agent, then
+    waiting for them to hold their vehicles and go offline."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        ground: GroundStation,
+        presence: TeamPresence,
+        events: EventSink,
+        notify: Notify,
+    ) -> None:
+        self.sent = False
+        self._bus = bus
+        self._ground = ground
+        self._presence = presence
+        self._events = events
+        self._notify = notify
+
+    async def send(self) -> None:
+        t = _mission_t(self._ground)
+        self._presence.expect(v for v, _report in self._ground.state.reports)
+        try:
+            await self._bus.publish(
+                topics.command(), Command(sender=GROUND_CLIENT, t_s=t, command="shutdown"), qos=1
+            )
+        except BusError as exc:
+            self._events.emit("shutdown_not_sent", t, reason=str(exc))
+            self._notify(f"could not send the shutdown command: {exc}")
+            raise
+        self.sent = True
+        self._events.emit("shutdown_sent", t, agents=sorted(self._presence.online))
+        self._notify(f"mission over at t = {t:.1f} s: shutdown sent to the agents")
+
+    async def wait_offline(self, grace_s: float) -> None:
+        t = _mission_t(self._ground)
+        try:
+            async with asyncio.timeout(grace_s):
+                await self._presence.all_offline()
+        except TimeoutError:
+            online = sorted(self._presence.online)
+            self._events.emit("agents_still_online", t, vehicles=online)
+            self._notify(f"agents still online after {grace_s:.0f} s: {online}")
+        else:
+            self._notify(f"every agent stopped ({len(self._presence.seen)} seen)")
+        with contextlib.suppress(BusError):
+            await self._bus.publish(
+                topics.link(GROUND_CLIENT),
+                LinkState(sender=GROUND_CLIENT, t_s=t, online=False, reason="mission over"),
+            )
+
+
+# --- one vehicle's agent ----------------------------------------------------------------------
+
+
+@dataclass
+class AgentResult:
+    """How an agent process ended and what it counted."""
+
+    vehicle: int
+    reason: str  # "shutdown", "SIGINT", "SIGTERM", or why the vehicle link ended
+    stopped_by: signal.Signals | None = None
+    counters: dict[str, Any] = field(default_factory=dict)
+
+
+def agent_url(
+    plan: MissionPlan, vehicle: int, connect_url: str | None, base_port: int | None
+) -> str:
+    """The vehicle's MAVSDK URL: ``connect_url``; else the config's URL for this vehicle (one
+    per vehicle); else the built-in simulator's port ``base_port + vehicle``."""
+    if not 0 <= vehicle < plan.count:
+        raise ConfigError(
+            f"vehicle index {vehicle} is out of range: the mission has {plan.count} vehicles"
+            f" (0..{plan.count - 1})"
+        )
+    if connect_url is not None:
+        return connect_url
+    urls = plan.config.link.connect
+    if urls:
+        if len(urls) != plan.count:
+            raise ConfigError(
+                f"the config lists {len(urls)} connect URLs for {plan.count} vehicles;"
+                " give this vehicle's with --connect"
+            )
+        return urls[vehicle]
+    port = base_port if base_port is not None else plan.config.sim.base_port
+    return f"udpin://127.0.0.1:{port + vehicle}"
+
+
+async def run_agent(
+    plan: MissionPlan,
+    vehicle: int,
+    broker_url: str,
+    connect_url: str,
+    out_dir: Path,
+    *,
+    builtin_simulator: bool = False,
+    notify: Notify = _quiet,
+) -> AgentResult:
+    """One agent process: fly ``vehicle`` (0-based) until the ground's shutdown or a signal.
+
+    Opens the bus first (an unreachable broker fails before the vehicle is touched), then a
+    MAVSDK link to system id ``vehicle + 1`` on ``connect_url``, brings it to offboard control
+    and runs its ``VehicleAgent``. ``builtin_simulator``: the vehicle is the built-in simulator
+    (velocity setpoints) unless the config names an autopilot. Raises the project's errors
+    (``BusError``, ``LinkError``, ``ConfigError``) as themselves.
+    """
+    if not 0 <= vehicle < plan.count:
+        raise ConfigError(f"vehicle index {vehicle} is out of range 0..{plan.count - 1}")
+    name = f"agent-{vehicle}"
+    stop = StopFlag()
+    result = AgentResult(vehicle, "")
+    async with AsyncExitStack() as stack:
+        eventlog = stack.enter_context(EventLog(out_dir / f"events-{name}.jsonl"))
+        events: EventSink = LoggingSink(eventlog)
+        stack.enter_context(stop_on_signals(stop))
+        will = Will(
+            topics.link(vehicle),
+            LinkState(sender=name, t_s=0.0, online=False, vehicle=vehicle, reason="vanished"),
+        )
+        bus = await stack.enter_async_context(open_bus(broker_url, client_id=name, will=will))
+        commands = await stack.enter_async_context(bus.subscribe(topics.ALL_COMMANDS))
+        await bus.publish(
+            topics.link(vehicle), LinkState(sender=name, t_s=0.0, online=True, vehicle=vehicle)
+        )
+        events.emit(
+            "agent_start", 0.0, vehicle=vehicle, url=connect_url, bus=_broker_name(broker_url)
+        )
+        flight = _Flight(plan, vehicle, bus, events, notify)
+        try:
+            async with _plain_errors(), asyncio.TaskGroup() as tg:
+                listener = tg.create_task(
+                    _watch_shutdown(commands, vehicle, stop), name=f"{name}-shutdown"
+                )
+                flying = tg.create_task(
+                    flight.fly(connect_url, out_dir, builtin_simulator), name=f"{name}-flight"
+                )
+                flying.add_done_callback(lambda _t: stop.set("vehicle link closed"))
+                result.reason = await stop.wait()
+                result.stopped_by = stop.signum
+                events.emit("agent_stop", flight.last_t_s, vehicle=vehicle, reason=result.reason)
+                flying.cancel()  # the link puts the vehicle in hold as it closes
+                listener.cancel()
+        finally:
+            result.counters = flight.counters(bus)
+            (out_dir / f"{name}.json").write_text(
+                json.dumps(dataclasses.asdict(result), indent=2, default=str) + "\n"
+            )
+            with contextlib.suppress(BusError):
+                await bus.publish(
+                    topics.link(vehicle),
+                    LinkState(
+                        sender=name,
+                        t_s=flight.last_t_s,
+                        online=False,
+                        vehicle=vehicle,
+                        reason=result.reason or "error",
+                    ),
+                )
+    return result
+
+
+async def _watch_shutdown(commands: Subscription, vehicle: int, stop: StopFlag) -> None:
+    async for _topic, message in commands:
+        if (
+            isinstance(message, Command)
+            and message.command == "shutdown"
+            and (message.vehicles is None or vehicle in message.vehicles)
+        ):
+            stop.set("shutdown")
+            return
+
+
+class _Flight:
+    """The vehicle side of an agent process: link, offboard, tlog, and the agent loop."""
+
+    def __init__(
+        self, plan: MissionPlan, vehicle: int, bus: Bus, events: EventSink, notify: Notify
+    ) -> None:
+        self._plan = plan
+        self._vehicle = vehicle
+        self._bus = bus
+        self._events = events
+        self._notify = notify
+        self._link: VehicleLink | None = None
+        self._agent: VehicleAgent | None = None
+
+    @property
+    def last_t_s(self) -> float:
+        latest = self._link.latest if self._link is not None else None
+        return latest.t_s if latest is not None else 0.0
+
+    def counters(self, bus: Bus) -> dict[str, Any]:
+        out: dict[str, Any] = {"bus": dataclasses.asdict(bus.stats)}
+        if self._agent is not None:
+            out["agent"] = dataclasses.asdict(self._agent.counters)
+        link_counters = getattr(self._link, "counters", None)
+        if dataclasses.is_dataclass(link_counters) and not isinstance(link_counters, type):
+            out["link"] = dataclasses.asdict(link_counters)
+        return out
+
+    async def fly(self, url: str, out_dir: Path, builtin: bool) -> None:
+        plan, cfg, i = self._plan, self._plan.config, self._vehicle
+        autopilot = None if cfg.link.autopilot == "auto" else cfg.link.autopilot
+        if builtin:
+            autopilot = autopilot or "velocity"  # the built-in simulator takes velocity setpoints
+        origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
+        link_config = LinkConfig(
+            plan.setpoint_limits,
+            autopilot=autopilot,
+            link_timeout_s=cfg.link.link_timeout_s,
+        )
+        async with AsyncExitStack() as stack:
+            hub = await stack.enter_async_context(MavsdkHub([url], origin))
+            self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
+            link = await stack.enter_async_context(
+                hub.link(i + 1, link_config, timeout_s=cfg.link.connect_timeout_s)
+            )
+            self._link = link
+            await prepare_vehicle(link, plan, self._events)
+            self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
+            tlog = stack.enter_context(
+                TlogWriter(out_dir / f"vehicle-{i + 1}.tlog", i + 1, time.time())
+            )
+            self._agent = VehicleAgent(
+                plan.agents[i],
+                link,
+                self._bus,
+                self._events,
+                AgentRuntimeParams(altitude_m=cfg.link.altitude_m),
+            )
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(record_tlog(link, tlog), name=f"tlog-{i + 1}")
+                tg.create_task(self._agent.run(), name=self._agent.name)

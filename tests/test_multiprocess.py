@@ -1,0 +1,279 @@
+"""The mission as separate processes over a real mosquitto: ``standoff ground`` and ``agent``.
+
+Every process is a real ``python -m app`` subprocess; the ground station runs the built-in
+simulator (``--sitl``) on free UDP ports, the broker is a real mosquitto on a free TCP port.
+Readiness is read from the processes' own output lines, never waited for with sleeps.
+"""
+
+import asyncio
+import contextlib
+import json
+import signal
+import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from sitl.ports import find_free_udp_base_port
+from tests.mosquitto import (
+    Mosquitto,
+    free_port,
+    mosquitto_fixture,  # noqa: F401
+)
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parent.parent
+
+# The team loiters 350 m from the target, gets the tracking command at 5 s, gathers and spaces
+# while the target waits (50 s), then tracks it for 60 s at 3 m/s: 120 s of mission time, 40 s
+# of wall time at speed-up 3.
+SHORT_MISSION = """
+name = "short-mqtt"
+vehicles = {vehicles}
+radius_m = 90.0
+tracking_command_s = 5.0
+end_s = {end_s}
+
+[limits]
+cruise_speed_m_s = 14.0
+min_speed_m_s = 10.0
+max_speed_m_s = 18.0
+max_accel_m_s2 = 2.0
+max_course_rate_rad_s = 0.2
+
+[standby]
+east_m = -350.0
+north_m = 0.0
+radius_m = 150.0
+
+[target]
+kind = "waypoints"
+wait_s = 50.0
+legs = [{{ to_east_m = 0.0, to_north_m = 180.0, speed_m_s = 3.0, label = "A-B" }}]
+
+[link]
+connect_timeout_s = 60.0
+
+[sim]
+speedup = 3.0
+"""
+
+
+def write_mission(tmp_path: Path, vehicles: int = 3, end_s: float = 120.0) -> Path:
+    path = tmp_path / "short-mqtt.toml"
+    path.write_text(SHORT_MISSION.format(vehicles=vehicles, end_s=end_s), encoding="utf-8")
+    return path
+
+
+@dataclass
+class Standoff:
+    """One ``python -m app ...`` subprocess: stdout read line by line, stderr to a file."""
+
+    proc: asyncio.subprocess.Process
+    stderr_path: Path
+    lines: list[str] = field(default_factory=list)
+
+    async def wait_for(self, needle: str, timeout_s: float) -> str:
+        """Read stdout until a line containing ``needle``; fail with what was seen otherwise."""
+        assert self.proc.stdout is not None
+        try:
+            async with asyncio.timeout(timeout_s):
+                while True:
+                    raw = await self.proc.stdout.readline()
+                    if not raw:
+                        pytest.fail(f"exited before {needle!r}:\n{self.transcript()}")
+                    line = raw.decode(errors="replace").rstrip()
+                    self.lines.append(line)
+                    if needle in line:
+                        return line
+        except TimeoutError:
+            pytest.fail(f"no {needle!r} within {timeout_s} s:\n{self.transcript()}")
+
+    async def finish(self, timeout_s: float) -> int:
+        """Wait for the process to exit (reading the rest of stdout); its exit code."""
+        async with asyncio.timeout(timeout_s):
+            out, _ = await self.proc.communicate()
+        self.lines += out.decode(errors="replace").splitlines()
+        assert self.proc.returncode is not None
+        return self.proc.returncode
+
+    def stdout(self) -> str:
+        return "\n".join(self.lines)
+
+    def stderr(self) -> str:
+        return self.stderr_path.read_text(errors="replace") if self.stderr_path.exists() else ""
+
+    def transcript(self) -> str:
+        return f"--- stdout\n{self.stdout()}\n--- stderr\n{self.stderr()[-3000:]}"
+
+
+def one_line(text: str) -> str:
+    """The only line of ``text`` (a one-line error), failing when there are more or none."""
+    lines = text.strip().splitlines()
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+@contextlib.asynccontextmanager
+async def standoff(*args: str, stderr_path: Path) -> AsyncIterator[Standoff]:
+    """Start ``python -m app ARGS``; on the way out, stop it (SIGINT, then kill) if it runs."""
+    with stderr_path.open("wb") as err:
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable,
+            "-m",
+            "app",
+            *args,
+            cwd=REPO,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=err,
+        )
+        try:
+            yield Standoff(proc, stderr_path)
+        finally:
+            if proc.returncode is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    async with asyncio.timeout(15.0):
+                        await proc.communicate()
+                except TimeoutError:
+                    proc.kill()
+                    await proc.wait()
+
+
+async def test_ground_and_three_agents_fly_the_mission_over_mosquitto(
+    tmp_path: Path, mosquitto: Mosquitto
+) -> None:
+    mission = write_mission(tmp_path)
+    base_port = find_free_udp_base_port(3)
+    out = tmp_path / "run"
+    common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
+    common += ["--out", str(out)]
+    async with contextlib.AsyncExitStack() as stack:
+        agents = [
+            await stack.enter_async_context(
+                standoff("agent", "--vehicle", str(i), *common, stderr_path=tmp_path / f"a{i}.err")
+            )
+            for i in range(3)
+        ]
+        for i, agent in enumerate(agents):  # each agent listens on its vehicle's port
+            await agent.wait_for(f"waiting for vehicle {i + 1}", 60.0)
+        ground = await stack.enter_async_context(
+            standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
+        )
+        await ground.wait_for("ground station ready", 60.0)
+        for i, agent in enumerate(agents):
+            await agent.wait_for(f"vehicle {i + 1} under offboard control", 60.0)
+        assert await ground.finish(120.0) == 0, ground.transcript()
+        codes = [await agent.finish(30.0) for agent in agents]
+
+    for i, (agent, code) in enumerate(zip(agents, codes, strict=True)):
+        assert code == 0, agent.transcript()
+        assert f"agent {i}: shutdown by the ground station" in agent.stdout()
+        assert "hold on exit failed" not in agent.stderr(), agent.transcript()
+        report = json.loads((out / f"agent-{i}.json").read_text())
+        assert report["reason"] == "shutdown"
+        assert report["counters"]["agent"]["ticks"] > 100
+        assert report["counters"]["link"]["setpoints"] > 100
+        assert report["counters"]["bus"]["malformed"] == 0
+        assert (out / f"vehicle-{i + 1}.tlog").stat().st_size > 10_000
+        agent_events = [json.loads(line) for line in (out / f"events-agent-{i}.jsonl").open()]
+        kinds = [e["kind"] for e in agent_events]
+        assert "offboard" in kinds
+        assert {"kind": "agent_stop", "vehicle": i, "reason": "shutdown"}.items() <= (
+            agent_events[-1].items()
+        )
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is False
+    assert summary["mission_t_s"] >= 120.0
+    assert summary["convergence"]["time_to_circle_s"] is not None
+    assert "track:A-B" in summary["parts"]
+    assert (out / "track.csv").stat().st_size > 0
+    events = [json.loads(line) for line in (out / "events.jsonl").open()]
+    shutdown = next(e for e in events if e["kind"] == "shutdown_sent")
+    assert shutdown["t_s"] >= 120.0
+    offline = {e["vehicle"]: e["reason"] for e in events if e["kind"] == "agent_offline"}
+    assert offline == {0: "shutdown", 1: "shutdown", 2: "shutdown"}
+    assert not any(e["kind"] == "agents_still_online" for e in events)
+
+
+async def test_sigterm_holds_the_vehicle_and_sigint_stops_the_ground(
+    tmp_path: Path, mosquitto: Mosquitto
+) -> None:
+    mission = write_mission(tmp_path, vehicles=1, end_s=600.0)
+    base_port = find_free_udp_base_port(1)
+    out = tmp_path / "run"
+    common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
+    common += ["--out", str(out)]
+    async with contextlib.AsyncExitStack() as stack:
+        ground = await stack.enter_async_context(
+            standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
+        )
+        await ground.wait_for("ground station ready", 60.0)
+        agent = await stack.enter_async_context(
+            standoff("agent", "--vehicle", "0", *common, stderr_path=tmp_path / "a0.err")
+        )
+        await agent.wait_for("vehicle 1 under offboard control", 60.0)
+        agent.proc.send_signal(signal.SIGTERM)
+        assert await agent.finish(30.0) == 128 + signal.SIGTERM, agent.transcript()
+        ground.proc.send_signal(signal.SIGINT)
+        assert await ground.finish(30.0) == 130, ground.transcript()
+
+    assert "stopped by SIGTERM; vehicle 1 in hold" in agent.stdout()
+    assert "hold on exit failed" not in agent.stderr(), agent.transcript()
+    assert json.loads((out / "agent-0.json").read_text())["reason"] == "SIGTERM"
+    events = [json.loads(line) for line in (out / "events.jsonl").open()]
+    kinds = [e["kind"] for e in events]
+    assert {"kind": "agent_offline", "vehicle": 0, "reason": "SIGTERM"}.items() <= next(
+        e for e in events if e["kind"] == "agent_offline"
+    ).items()
+    assert "interrupted" in kinds
+    assert "shutdown_sent" in kinds
+    assert json.loads((out / "summary.json").read_text())["interrupted"] is True
+
+
+async def test_agent_with_the_broker_down_exits_with_one_line(tmp_path: Path) -> None:
+    mission = write_mission(tmp_path)
+    port = free_port()  # nothing listens there
+    async with standoff(
+        "agent", "--vehicle", "0", str(mission), "--broker", f"mqtt://127.0.0.1:{port}",
+        "--out", str(tmp_path / "run"), stderr_path=tmp_path / "a.err",
+    ) as agent:  # fmt: skip
+        assert await agent.finish(40.0) == 2
+    # the bus logs each refused attempt (warnings), then the command gives its one-line reason
+    *retries, line = agent.stderr().strip().splitlines()
+    assert line.startswith("standoff agent: error: cannot connect to the broker at ")
+    assert f"127.0.0.1:{port}" in line
+    assert all(" WARNING app.adapters.bus.mqtt: " in r for r in retries), agent.stderr()
+    assert not (tmp_path / "run" / "vehicle-1.tlog").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "reason"),
+    [
+        (["--broker", "http://127.0.0.1:1883"], "bad broker URL"),
+        (
+            ["--broker", "mqtt://127.0.0.1:1883", "--vehicle", "3"],
+            "vehicle index 3 is out of range",
+        ),
+        (["--broker", "mqtt://127.0.0.1:1883", "--connect", "udp://x"], "vehicle URL 'udp://x'"),
+        ([], "no MQTT broker"),
+    ],
+)
+async def test_agent_bad_input_is_one_line(tmp_path: Path, args: list[str], reason: str) -> None:
+    mission = write_mission(tmp_path)
+    argv = ["agent", str(mission), *(args if "--vehicle" in args else ["--vehicle", "0", *args])]
+    async with standoff(*argv, stderr_path=tmp_path / "a.err") as agent:
+        assert await agent.finish(30.0) == 2
+    assert reason in one_line(agent.stderr())
+
+
+async def test_ground_bad_broker_url_is_one_line(tmp_path: Path) -> None:
+    mission = write_mission(tmp_path)
+    argv = ["ground", str(mission), "--broker", "mqtt://127.0.0.1:1883/path", "--quiet"]
+    async with standoff(*argv, stderr_path=tmp_path / "g.err") as ground:
+        assert await ground.finish(30.0) == 2
+    assert one_line(ground.stderr()).startswith("standoff ground: error: bad broker URL")
