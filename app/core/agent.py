@@ -18,6 +18,7 @@ GuidanceLaw = Literal["proposed", "frew", "fixed"]
 PhaseLaw = Literal["paper", "frew", "none"]
 Orbit = Literal["ccw", "cw"]
 FieldMode = Literal["field", "inverse"]
+OrbitPlan = Literal["circle", "ellipse"]
 
 FREW_C = 2.0
 
@@ -69,6 +70,11 @@ class GuidanceParams:
     ``inverse_field``: the ILVF switch (default: on for ``proposed`` only).
     ``relative_speed``: with a moving target, the speed command is the speed relative to the
     target (eq. 15 with lambda = speed); False makes it the ground speed (Frew's choice).
+    ``orbit_plan``: ``circle`` (the paper's: the field converges to the circle r_d around the
+    target whatever its speed) or ``ellipse`` (improvement: around a target too fast for the
+    circle, the field converges to the flyable ellipse closest to it, aligned with the target's
+    velocity; ``guidance.planned_orbit_axes`` with ``plan_margin`` of the course-rate limit and
+    semi-axes within ``plan_max_stretch`` r_d of r_d; the circle while it is flyable).
     """
 
     radius_m: float
@@ -83,6 +89,9 @@ class GuidanceParams:
     switch_enter_below_m: float = 0.0
     switch_leave_above_m: float = 0.5
     relative_speed: bool = True
+    orbit_plan: OrbitPlan = "circle"
+    plan_margin: float = 1.0
+    plan_max_stretch: float = 0.5
     #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
     orbit_sign: int = field(init=False, repr=False)
     #: whether the ILVF switch is used (derived from ``law`` and ``inverse_field``)
@@ -106,6 +115,18 @@ class GuidanceParams:
         if not (math.isfinite(self.curvature_margin) and 0.0 < self.curvature_margin <= 1.0):
             raise ValueError(
                 f"GuidanceParams.curvature_margin must be in (0, 1], got {self.curvature_margin!r}"
+            )
+        if self.orbit_plan not in ("circle", "ellipse"):
+            raise ValueError(
+                f"GuidanceParams.orbit_plan must be 'circle' or 'ellipse', got {self.orbit_plan!r}"
+            )
+        if not (math.isfinite(self.plan_margin) and 0.0 < self.plan_margin <= 1.0):
+            raise ValueError(
+                f"GuidanceParams.plan_margin must be in (0, 1], got {self.plan_margin!r}"
+            )
+        if not (math.isfinite(self.plan_max_stretch) and 0.0 < self.plan_max_stretch < 1.0):
+            raise ValueError(
+                f"GuidanceParams.plan_max_stretch must be in (0, 1), got {self.plan_max_stretch!r}"
             )
         uses_inverse = self.law == "proposed" if self.inverse_field is None else self.inverse_field
         object.__setattr__(self, "orbit_sign", 1 if self.orbit == "ccw" else -1)
@@ -375,7 +396,6 @@ def agent_step(
     _check_inputs(inputs)
     env, g = params.envelope, params.guidance
     own, tgt = inputs.own, inputs.target
-    sign = g.orbit_sign
     k, w = env.course_gain_per_s, env.max_course_rate_rad_s
     speed_now = own.speed_m_s if own.speed_m_s > 0.0 else env.cruise_speed_m_s
     new_state = _guidance_c(state, params, speed_now)
@@ -384,15 +404,20 @@ def agent_step(
     x, y = own.east_m - tgt.east_m, own.north_m - tgt.north_m
     vx = own.speed_m_s * math.sin(own.course_rad) - tgt.v_east_m_s
     vy = own.speed_m_s * math.cos(own.course_rad) - tgt.v_north_m_s
-    rd = g.radius_m
     events = _NO_EVENTS
 
-    if g.uses_inverse_field and inputs.t_s >= new_state.next_switch_check_t_s:
-        new_state, events = _switch_rule(new_state, inputs, params, x, y, vx, vy, c)
+    if g.uses_inverse_field:
+        if inputs.t_s >= new_state.next_switch_check_t_s:
+            new_state, events = _switch_rule(new_state, inputs, params, x, y, vx, vy, c)
+    elif new_state.mode == "inverse":
+        # the switch is off (e.g. the mission's track stage after an approach that used it):
+        # never stay on the inverse field, which leads away from the circle
+        new_state = replace(new_state, mode="field")
+        events = (AgentEvent(inputs.t_s, "inverse-field-off", "switch disabled"),)
 
     inverse = new_state.mode == "inverse"
-    rel_course, rel_rate = guidance._course_and_rate(x, y, vx, vy, rd, c, sign, inverse)
     speed_cmd = _speed_command(inputs, params, new_state)
+    rel_course, rel_rate = _relative_course(x, y, vx, vy, c, inverse, tgt, params)
 
     if (
         tgt.v_east_m_s == 0.0
@@ -506,3 +531,35 @@ def _ground_course(
     rate = (gy * ax - gx * ay) / g2
     # (clamped again only against rounding: _moving_target_velocity already scaled it in)
     return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), env.max_speed_m_s)
+
+
+def _relative_course(
+    x: float,
+    y: float,
+    vx: float,
+    vy: float,
+    c: float,
+    inverse: bool,
+    tgt: TargetInfo,
+    params: AgentParams,
+) -> tuple[float, float]:
+    """Course and rate of the field in the target's frame: the paper's circle, or (``orbit_plan
+    = "ellipse"``) the planned orbit around the target (``guidance.planned_orbit_axes``: the
+    circle while it is flyable, else the flyable ellipse closest to it, aligned with the
+    target's velocity)."""
+    g, env = params.guidance, params.envelope
+    rd, sign = g.radius_m, g.orbit_sign
+    speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
+    if g.orbit_plan == "ellipse" and not inverse and speed >= 0.5:
+        a, b = guidance.planned_orbit_axes(
+            rd,
+            speed,
+            env.min_speed_m_s,
+            env.max_course_rate_rad_s,
+            g.plan_margin,
+            g.plan_max_stretch,
+        )
+        if a != b:
+            ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
+            return guidance.ellipse_course_and_rate(x, y, vx, vy, rd, c, sign, ux, uy, a, b)
+    return guidance._course_and_rate(x, y, vx, vy, rd, c, sign, inverse)

@@ -21,6 +21,7 @@ direction along the vehicle's own course (or due east when no course is known), 
 simply flies out of the centre; this is stated in every function that can reach it.
 """
 
+import functools
 import math
 
 TAU = 2.0 * math.pi
@@ -600,3 +601,127 @@ def _moving_target_velocity(
     elif g == 0.0:
         gx, gy = s_min * dx, s_min * dy
     return gx, gy, lam, held
+
+
+# --------------------------------------------------------------------------------------------
+# a planned orbit around a fast target (improvement over the paper)
+
+
+def planned_orbit_axes(
+    radius_m: float,
+    target_speed_m_s: float,
+    min_speed_m_s: float,
+    max_course_rate_rad_s: float,
+    margin: float = 1.0,
+    max_stretch: float = 0.5,
+) -> tuple[float, float]:
+    """Semi-axes (along, across the target's motion), m, of the relative orbit the team flies
+    around a target moving at ``target_speed_m_s``: the ellipse closest to the circle r_d (least
+    RMS of r - r_d along it) that the vehicle can fly at ``margin`` of its course-rate limit.
+
+    A vehicle on a relative path with unit tangent d and curvature kappa, at speed lambda
+    relative to a target moving at v_t, has the ground velocity v_g = v_t + lambda d, whose course
+    turns at lambda^2 kappa (lambda + v_t . d) / |v_g|^2. Where it flies against the target's
+    motion its ground speed cannot drop below v_min, which forces lambda >= lambda_lo(d) (the
+    root of |v_t + lambda d| = v_min); the turn rate at lambda_lo is the least the path can ask
+    there. The circle r_d is flyable while that stays within margin * W everywhere (about 3.4 m/s
+    of target speed with Table 2 and margin 1); beyond, an ellipse longer along the motion has
+    flatter sides where the vehicle flies against the target, at the cost of a distance error.
+    The ellipse is found by a grid search over the semi-axes (2 m steps, up to ``max_stretch``
+    r_d from r_d), cached per target speed rounded *up* to 0.25 m/s (so it stays flyable for the
+    speeds below). A target at or above v_min cannot be orbited at all; it is treated as one
+    just below v_min.
+
+    Returns (a, b); (r_d, r_d) when the circle is flyable.
+    """
+    _check_finite(target_speed_m_s=target_speed_m_s)
+    for name, value in (
+        ("radius_m", radius_m),
+        ("min_speed_m_s", min_speed_m_s),
+        ("max_course_rate_rad_s", max_course_rate_rad_s),
+        ("margin", margin),
+        ("max_stretch", max_stretch),
+    ):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    v_bin = math.ceil(min(abs(target_speed_m_s), 0.95 * min_speed_m_s) / 0.25 - 1e-9) * 0.25
+    return _orbit_axes(
+        float(radius_m), v_bin, float(min_speed_m_s), margin * max_course_rate_rad_s, max_stretch
+    )
+
+
+def _turn_need(a, b, v: float, v_min: float, t):  # type: ignore[no-untyped-def]
+    """Largest ground course rate (rad/s) each ellipse (a, b arrays, broadcast against the
+    samples t of the parameter) asks at the least relative speed lambda_lo."""
+    import numpy as np
+
+    du, dw = -a * np.sin(t), b * np.cos(t)
+    norm = np.hypot(du, dw)
+    kappa = a * b / norm**3
+    along = v * du / norm
+    lam = -along + np.sqrt(along * along + v_min * v_min - v * v)
+    g2 = lam * lam + 2.0 * lam * along + v * v
+    return np.max(lam * lam * kappa * (lam + along) / g2, axis=-1), norm
+
+
+@functools.lru_cache(maxsize=1024)
+def _orbit_axes(
+    rd: float, v: float, v_min: float, w: float, max_stretch: float
+) -> tuple[float, float]:
+    import numpy as np
+
+    # the ellipse is symmetric under t -> -t and t -> pi - t: a quarter of it is enough
+    t = np.linspace(0.0, 0.5 * math.pi, 46)
+    need, _ = _turn_need(np.float64(rd), np.float64(rd), v, v_min, t)
+    if v <= 0.0 or need <= w:
+        return rd, rd
+    span = max_stretch * rd
+    a = np.arange(rd, rd + span + 1e-9, 2.0)[:, None, None]
+    b = np.arange(rd - span, rd + 10.0 + 1e-9, 2.0)[None, :, None]
+    need, arc = _turn_need(a, b, v, v_min, t)
+    err = np.hypot(a * np.cos(t), b * np.sin(t)) - rd
+    rms = np.sqrt(np.sum(err * err * arc, axis=-1) / np.sum(arc, axis=-1))
+    rms = np.where(need <= w, rms, np.inf)
+    k = int(np.argmin(rms))
+    ia, ib = divmod(k, rms.shape[1])
+    if not math.isfinite(float(rms[ia, ib])):
+        return rd + span, rd
+    return float(a[ia, 0, 0]), float(b[0, ib, 0])
+
+
+def ellipse_course_and_rate(
+    x: float,
+    y: float,
+    vx: float,
+    vy: float,
+    rd: float,
+    c: float,
+    sign: int,
+    ux: float,
+    uy: float,
+    a: float,
+    b: float,
+) -> tuple[float, float]:
+    """Course (clockwise from north) and its rate of the field that converges to the ellipse
+    with semi-axis ``a`` along the unit vector (ux, uy) and ``b`` across it, centred on the
+    target: the ordinary field (eq. 8) in coordinates stretched by r_d/a and r_d/b, mapped back.
+    (x, y), (vx, vy): position and velocity relative to the target (east, north). The linear
+    map keeps the field's convergence; on the ellipse the field is its tangent. The rate is
+    exact along the given relative velocity for a fixed ellipse (d psi / d phi of the map times
+    the stretched field's own rate). With a = b = r_d this is ``field_course``'s course and rate.
+    """
+    # coordinates along u and across it (w = u turned counter-clockwise)
+    pu, pw = x * ux + y * uy, -x * uy + y * ux
+    vu, vw = vx * ux + vy * uy, -vx * uy + vy * ux
+    alpha, beta = a / rd, b / rd
+    course_q, rate_q = _course_and_rate(
+        pu / alpha, pw / beta, vu / alpha, vw / beta, rd, c, sign, False
+    )
+    # math angle (counter-clockwise from u) of the stretched field, and its rate
+    phi = 0.5 * math.pi - course_q
+    phi_dot = -rate_q
+    cp, sp = math.cos(phi), math.sin(phi)
+    psi = math.atan2(beta * sp, alpha * cp)
+    psi_dot = alpha * beta / (alpha * alpha * cp * cp + beta * beta * sp * sp) * phi_dot
+    world = psi + math.atan2(uy, ux)
+    return _wrap_pi(0.5 * math.pi - world), -psi_dot
