@@ -87,15 +87,12 @@ class ObservationsConfig(StrictModel):
         return self
 
 
-class EstimatorConfig(StrictModel):
-    """The IMM's process noise per model, the turn model's rate, and the federated feedback."""
+class EstimatorSettings(StrictModel):
+    """The target estimator: ``config`` names its parameter file (``configs/estimator.toml``:
+    models, mode transitions, gating, federated feedback); ``use_target_accel`` passes the
+    estimated acceleration on to the moving-target correction."""
 
-    q_cv: Positive = 0.01
-    q_ca: Positive = 0.05
-    q_turn: Positive = 0.05
-    turn_rate_deg_s: Positive = 3.0
-    feedback: Literal["none", "reset", "mixture"] = "mixture"
-    max_lag_s: NonNegative = 1.0
+    config: str = "estimator"
     use_target_accel: bool = False
 
 
@@ -137,7 +134,7 @@ class MissionConfig(StrictModel):
     stages: StagesConfig = StagesConfig()
     target: TargetConfig
     observations: ObservationsConfig = ObservationsConfig()
-    estimator: EstimatorConfig = EstimatorConfig()
+    estimator: EstimatorSettings = EstimatorSettings()
     link: LinkSettings = LinkSettings()
     sim: SimSettings = SimSettings()
     origin: OriginConfig = OriginConfig()

@@ -12,10 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from app.cli.estimate import ScenarioConfig, load_estimator
+from app.cli.estimate import ScenarioConfig
 from app.config import load_config
 from app.core.estimation.metrics import ErrorSeries, errors, nees_band
 from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
+from app.estimator_config import load_estimator
 from app.runtime.estimation_scenarios import ScenarioData, generate
 
 pytestmark = pytest.mark.slow

@@ -3,6 +3,7 @@ import math
 import numpy as np
 import pytest
 
+from app.core.estimation.federated import MainParams
 from app.core.estimation.messages import LocalEstimate
 from app.core.ground import (
     GroundParams,
@@ -14,7 +15,9 @@ from app.core.ground import (
 )
 from app.core.stage import Stage
 
-PARAMS = GroundParams(vehicles=(0, 1, 2), radius_m=90.0, tracking_command_t_s=10.0)
+PARAMS = GroundParams(
+    vehicles=(0, 1, 2), radius_m=90.0, tracking_command_t_s=10.0, main=MainParams(feedback="none")
+)
 
 
 def on_circle(t, vehicle, angle_deg):

@@ -27,13 +27,11 @@ from app.adapters.vehicle.autopilots import SetpointLimits
 from app.adapters.vehicle.link import CourseSpeedCommand, GeodeticOrigin, VehicleLink
 from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams, VehicleEnvelope
-from app.core.estimation.federated import MainParams
-from app.core.estimation.imm import default_imm_params
-from app.core.estimation.local import LocalParams
 from app.core.ground import GroundParams
 from app.core.mission_agent import MissionAgentParams
 from app.core.stage import StageParams
 from app.errors import ConfigError
+from app.estimator_config import load_estimator
 from app.mission_config import MissionConfig
 from app.report.mission_plots import plot_mission
 from app.report.summary import TeamSample, summarize
@@ -98,17 +96,8 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
         )
         phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
-        e = config.estimator
-        imm = default_imm_params(
-            q_cv=e.q_cv,
-            q_ca=e.q_ca,
-            q_turn=e.q_turn,
-            turn_rate_rad_s=math.radians(e.turn_rate_deg_s),
-        )
-        local = LocalParams(
-            imm=imm, default_sigma_m=config.observations.sigma_m, max_lag_s=e.max_lag_s
-        )
-        main = MainParams(feedback=e.feedback)
+        estimator = load_estimator(config.estimator.config)
+        local, main = estimator.local, estimator.main
         agents = tuple(
             MissionAgentParams(
                 vehicle=i,
@@ -117,9 +106,9 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 standby_east_m=config.standby.east_m,
                 standby_north_m=config.standby.north_m,
                 local=local,
-                main=main if e.feedback != "none" else None,
+                main=main if main.feedback != "none" else None,
                 track=AgentParams(i, envelope, replace(guidance, inverse_field=False), phase),
-                use_target_accel=e.use_target_accel,
+                use_target_accel=config.estimator.use_target_accel,
             )
             for i in range(n)
         )

@@ -1,9 +1,39 @@
-"""Conversions between the bus's messages and the core's values (one place, both directions)."""
+"""Conversions between the bus's messages and the core's values (one place, both directions).
+
+Estimates travel with their per-model moments when the filter has them, so that the main
+filter's model-by-model ("modewise") fusion and feedback work across processes.
+"""
+
+from typing import Any
 
 import numpy as np
 
 from app.adapters.bus import messages as bus
 from app.core.estimation import messages as est
+
+
+def _nested(a: Any) -> Any:
+    return tuple(_nested(v) for v in a) if isinstance(a, list) else float(a)
+
+
+def _models(mu: Any, model_x: Any, model_p: Any) -> dict[str, Any]:
+    if mu is None or model_x is None or model_p is None:
+        return {}
+    return {
+        "mu": _nested(np.asarray(mu).tolist()),
+        "model_x": _nested(np.asarray(model_x).tolist()),
+        "model_P": _nested(np.asarray(model_p).tolist()),
+    }
+
+
+def _arrays(message: bus.LocalEstimate | bus.GlobalEstimate) -> dict[str, Any]:
+    if message.mu is None or message.model_x is None or message.model_P is None:
+        return {}
+    return {
+        "mu": np.array(message.mu),
+        "model_x": np.array(message.model_x),
+        "model_p": np.array(message.model_P),
+    }
 
 
 def observation_to_core(message: bus.TargetObservation, vehicle: int) -> est.Observation:
@@ -17,34 +47,38 @@ def observation_to_core(message: bus.TargetObservation, vehicle: int) -> est.Obs
 
 
 def local_to_bus(estimate: est.LocalEstimate, vehicle: int, sender: str) -> bus.LocalEstimate:
-    return bus.LocalEstimate.from_arrays(
+    return bus.LocalEstimate(
         sender=sender,
         t_s=estimate.t_s,
         vehicle=vehicle,
-        x=estimate.x,
-        P=estimate.p,
+        x=_nested(estimate.x.tolist()),
+        P=_nested(estimate.p.tolist()),
         q_scale=estimate.q_scale,
+        **_models(estimate.mu, estimate.model_x, estimate.model_p),
     )
 
 
 def local_to_core(message: bus.LocalEstimate) -> est.LocalEstimate:
+    models = _arrays(message)
     return est.LocalEstimate(
         sensor=str(message.vehicle),
         t_s=message.t_s,
         x=np.array(message.x),
         p=np.array(message.P),
-        mu=np.zeros(0),
+        mu=models.pop("mu", np.zeros(0)),
         q_scale=message.q_scale,
+        **models,
     )
 
 
 def global_to_bus(estimate: est.GlobalEstimate, sender: str) -> bus.GlobalEstimate:
-    return bus.GlobalEstimate.from_arrays(
+    return bus.GlobalEstimate(
         sender=sender,
         t_s=estimate.t_s,
-        x=estimate.x,
-        P=estimate.p,
+        x=_nested(estimate.x.tolist()),
+        P=_nested(estimate.p.tolist()),
         beta={int(sensor): share for sensor, share in estimate.beta if share > 0.0},
+        **_models(estimate.mu, estimate.model_x, estimate.model_p),
     )
 
 
@@ -54,4 +88,5 @@ def global_to_core(message: bus.GlobalEstimate) -> est.GlobalEstimate:
         x=np.array(message.x),
         p=np.array(message.P),
         beta=tuple((str(v), share) for v, share in sorted(message.beta.items())),
+        **_arrays(message),
     )

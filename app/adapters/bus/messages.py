@@ -28,6 +28,12 @@ State = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STAT
 Row = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Covariance = Annotated[tuple[Row, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Stage = Literal["standby", "gather", "adjust", "track"]
+MAX_MODELS = 8
+Probabilities = Annotated[
+    tuple[Annotated[float, Field(ge=0.0, le=1.0)], ...], Field(max_length=MAX_MODELS)
+]
+ModelStates = Annotated[tuple[State, ...], Field(max_length=MAX_MODELS)]
+ModelCovariances = Annotated[tuple[Covariance, ...], Field(max_length=MAX_MODELS)]
 
 _SYMMETRY_RTOL = 1e-6
 
@@ -50,6 +56,26 @@ def _check_covariance(p: tuple[tuple[float, ...], ...]) -> None:
         for j in range(i):
             if abs(p[i][j] - p[j][i]) > _SYMMETRY_RTOL * scale:
                 raise ValueError(f"P is not symmetric: P[{i}][{j}]={p[i][j]} P[{j}][{i}]={p[j][i]}")
+
+
+def _check_models(
+    mu: tuple[float, ...] | None,
+    model_x: tuple[tuple[float, ...], ...] | None,
+    model_p: tuple[tuple[tuple[float, ...], ...], ...] | None,
+) -> None:
+    given = [v is not None for v in (mu, model_x, model_p)]
+    if any(given) and not all(given):
+        raise ValueError("mu, model_x and model_P go together: give all three or none")
+    if mu is not None and model_x is not None and model_p is not None:
+        if not len(mu) == len(model_x) == len(model_p) >= 1:
+            raise ValueError(
+                "mu, model_x and model_P disagree on the number of models: "
+                f"{len(mu)}, {len(model_x)}, {len(model_p)}"
+            )
+        if abs(math.fsum(mu) - 1.0) > 1e-6:
+            raise ValueError(f"mode probabilities must sum to 1, got {math.fsum(mu)}")
+        for p in model_p:
+            _check_covariance(p)
 
 
 def _vector(x: ArrayLike) -> tuple[float, ...]:
@@ -85,10 +111,15 @@ class LocalEstimate(Message):
     x: State
     P: Covariance
     q_scale: Positive = 1.0  # the process-noise multiplier the local filter runs with (beta^-1)
+    # per IMM model (optional): mode probabilities, states and covariances (modewise fusion)
+    mu: Probabilities | None = None
+    model_x: ModelStates | None = None
+    model_P: ModelCovariances | None = None
 
     @model_validator(mode="after")
     def _covariance(self) -> Self:
         _check_covariance(self.P)
+        _check_models(self.mu, self.model_x, self.model_P)
         return self
 
     @classmethod
@@ -120,10 +151,14 @@ class GlobalEstimate(Message):
     x: State
     P: Covariance
     beta: dict[VehicleId, Annotated[float, Field(gt=0.0, le=1.0)]]
+    mu: Probabilities | None = None
+    model_x: ModelStates | None = None
+    model_P: ModelCovariances | None = None
 
     @model_validator(mode="after")
     def _check(self) -> Self:
         _check_covariance(self.P)
+        _check_models(self.mu, self.model_x, self.model_P)
         total = math.fsum(self.beta.values())
         if total > 1.0 + 1e-9:
             raise ValueError(f"the beta factors sum to {total}, more than 1")
