@@ -49,6 +49,7 @@ from app.runtime.ground import (
 from app.runtime.sim_process import simulator_process
 from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState
+from sitl.ports import find_free_udp_base_port, udp_ports_free
 from sitl.server import SimulatorServer
 from sitl.target import TargetPath
 
@@ -172,6 +173,9 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             telemetry_rate_hz=cfg.sim.telemetry_rate_hz,
             camera=cfg.sim.camera.build(),
             wind=cfg.sim.wind.build(),
+            # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a
+            # scheduling hiccup of a loaded machine at a speed-up, trip the offboard failsafe
+            offboard_timeout_min_wall_s=1.0,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
@@ -311,6 +315,12 @@ async def run_mission(
             sim: SimulatorServer | None = None
             if builtin:
                 port = base_port if base_port is not None else cfg.sim.base_port
+                if base_port is None and not udp_ports_free(port, plan.count):
+                    # another simulator or SITL is on the default ports: take free ones
+                    port = find_free_udp_base_port(plan.count)
+                    log.warning(
+                        "UDP %d.. busy: the built-in simulator uses %d..", cfg.sim.base_port, port
+                    )
                 if sim_mode == "inline":
                     sim = await stack.enter_async_context(SimulatorServer(sim_config(plan, port)))
                 else:
