@@ -4,10 +4,11 @@ Run:  .venv/bin/python -m benchmarks.bench_track [CONFIG] [--seeds 1 2 3] [--lat
 
 Flies the whole mission (``app.runtime.mission_fastsim``: IMM-UKF per vehicle on a seeded
 sigma^2 = 10 m^2 camera, the ground's fusion fed back, stages, 10 Hz control) once with the
-track stage on the paper's guidance (``orbit_plan="circle"``: the field to the circle r_d,
-eq. 15 correction) and once on the planned orbit (``orbit_plan="ellipse"``), with the same
-seed, and prints per track segment the RMS and max |distance error| (m) and |spacing error|
-(deg) of the team against the true target, with improved / paper ratios. With several seeds
+track stage on the mission's own guidance (the paper's: optimal c, the field to the circle r_d,
+the eq. 15 correction), on the planned orbit (``orbit_plan="ellipse"``), and on the planned
+orbit with c = 2 (law ``frew``), with the same seeds, and prints per track segment the RMS and
+max |distance error| (m) and |spacing error| (deg) of the team against the true target, with
+ratios against the paper's. With several seeds
 the figures are the mean over the seeds. Also prints the gather + adjust time and checks that
 every command was finite and within the speed and course-rate limits.
 """
@@ -16,11 +17,12 @@ import argparse
 import math
 import time
 from dataclasses import replace
-from typing import Literal
+from typing import Any
 
 import numpy as np
 
 from app.config import load_config
+from app.core.agent import AgentParams
 from app.mission_config import MissionConfig
 from app.runtime.mission import MissionPlan, build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
@@ -28,27 +30,17 @@ from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_
 KEYS = ("dist_rms_m", "dist_max_m", "spacing_rms_deg", "spacing_max_deg")
 
 
-def with_plan(
-    plan: MissionPlan, orbit_plan: Literal["circle", "ellipse"], phase_gain: float | None
-) -> tuple:
+def track_params(plan: MissionPlan, **guidance: Any) -> tuple[AgentParams, ...]:
+    """The mission's track-stage parameters with some guidance fields replaced."""
     out = []
     for a in plan.agents:
         track = a.track if a.track is not None else a.agent
-        phase = track.phase if phase_gain is None else replace(track.phase, gain_per_s=phase_gain)
-        guidance = replace(track.guidance, orbit_plan=orbit_plan)
-        out.append(replace(track, guidance=guidance, phase=phase))
+        out.append(replace(track, guidance=replace(track.guidance, **guidance)))
     return tuple(out)
 
 
-def fly(
-    plan: MissionPlan,
-    orbit_plan: Literal["circle", "ellipse"],
-    phase_gain: float | None,
-    seed: int,
-    latency: int,
-) -> dict:
+def fly(plan: MissionPlan, track: tuple[AgentParams, ...], seed: int, latency: int) -> dict:
     t0 = time.process_time()
-    track = with_plan(plan, orbit_plan, phase_gain)
     result = run_mission_sim(
         MissionSimSetup(plan, seed=seed, latency_ticks=latency, track_override=track)
     )
@@ -83,34 +75,28 @@ def main() -> None:
     parser.add_argument("config", nargs="?", default="hil")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     parser.add_argument("--latency-ticks", type=int, default=0)
-    parser.add_argument(
-        "--track-phase-gain",
-        type=float,
-        default=0.4,
-        help="phase gain of the third column's track stage (the first two keep the mission's)",
-    )
     args = parser.parse_args()
     plan = build_plan(load_config(args.config, MissionConfig))
     labels = tuple(plan.target.labels)
-    variants: dict[str, tuple[Literal["circle", "ellipse"], float | None]] = {
-        "paper": ("circle", None),
-        "improved": ("ellipse", None),
-        f"impr.+k={args.track_phase_gain:g}": ("ellipse", args.track_phase_gain),
+    variants = {
+        "paper": track_params(plan),
+        "planned": track_params(plan, orbit_plan="ellipse"),
+        "planned,c=2": track_params(plan, orbit_plan="ellipse", law="frew"),
     }
     runs = {
-        name: [fly(plan, law, gain, s, args.latency_ticks) for s in args.seeds]
-        for name, (law, gain) in variants.items()
+        name: [fly(plan, track, s, args.latency_ticks) for s in args.seeds]
+        for name, track in variants.items()
     }
     figures = {name: mean_figures(rs, labels) for name, rs in runs.items()}
-    gain = plan.agents[0].track.phase.gain_per_s if plan.agents[0].track else math.nan
     print(
         f"mission fast-sim '{plan.config.name}', seeds {args.seeds}, latency "
-        f"{args.latency_ticks} tick(s); track stage: paper = circle (eq. 15), improved = planned "
-        f"orbit, both at the mission's phase gain {gain:g}; ratios against paper"
+        f"{args.latency_ticks} tick(s). Track stage: paper = the mission's law (optimal c, the "
+        "circle, eq. 15); planned = the planned orbit (orbit_plan='ellipse'); planned,c=2 = the "
+        "same with c = 2 (law 'frew'). Ratios against paper."
     )
     names = list(variants)
-    header = f"{'segment':8s} {'figure':16s} " + " ".join(f"{n:>14s}" for n in names)
-    header += " " + " ".join(f"{'ratio ' + n[:8]:>15s}" for n in names[1:])
+    header = f"{'segment':8s} {'figure':16s} " + " ".join(f"{n:>12s}" for n in names)
+    header += " " + " ".join(f"{'ratio ' + n:>18s}" for n in names[1:])
     print(header)
     print("-" * len(header))
     for label in labels:
@@ -121,14 +107,14 @@ def main() -> None:
             ratios = [v / vals[0] if vals[0] > 0 else math.nan for v in vals[1:]]
             print(
                 f"{label:8s} {key:16s} "
-                + " ".join(f"{v:14.2f}" for v in vals)
+                + " ".join(f"{v:12.2f}" for v in vals)
                 + " "
-                + " ".join(f"{r:15.2f}" for r in ratios)
+                + " ".join(f"{r:18.2f}" for r in ratios)
             )
     for name in names:
         rs = runs[name]
         print(
-            f"{name:14s}: gather + adjust {[r['formation_s'] for r in rs]} s; commands finite and "
+            f"{name:12s}: gather + adjust {[r['formation_s'] for r in rs]} s; commands finite and "
             f"within limits: {all(r['commands_ok'] for r in rs)}; "
             f"cpu {np.mean([r['cpu_s'] for r in rs]):.1f} s/run"
         )

@@ -7,7 +7,7 @@ the order the live mission does, the same pure functions:
 - every camera period, each vehicle's seeded noisy camera (sigma^2 per axis, as the built-in
   simulator's) -> ``mission_agent.observe`` (its local IMM-UKF);
 - every ``estimate_period_s`` each agent's local estimate -> ``ground.hear_local`` (through the
-  same lossy bus conversion: the combined estimate, no model-wise parts);
+  live mission's bus conversions, ``app.runtime.wire``, both ways);
 - every control period: each vehicle's status -> ``ground.hear_status``; ``ground.tick`` (active
   team, fusion, stage); the fused estimate -> ``mission_agent.hear_fused``; the stage ->
   ``hear_mission``; teammates' fixes -> ``hear_teammate``; then ``mission_agent.control`` -> the
@@ -32,6 +32,7 @@ from app.core import mission_agent as logic
 from app.core.agent import AgentParams, OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.report.summary import TeamSample, VehicleSample, summarize
+from app.runtime import wire
 from app.runtime.mission import MissionPlan
 from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 
@@ -92,26 +93,14 @@ def _wrap_pi(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _bus_local(estimate: LocalEstimate) -> LocalEstimate:
-    """What the ground station receives over the bus (``app.runtime.wire``): no model parts."""
-    return LocalEstimate(
-        sensor=estimate.sensor,
-        t_s=estimate.t_s,
-        x=np.array(estimate.x),
-        p=np.array(estimate.p),
-        mu=np.zeros(0),
-        q_scale=estimate.q_scale,
-    )
+def _bus_local(estimate: LocalEstimate, vehicle: int) -> LocalEstimate:
+    """What the ground station receives over the bus: the live mission's own conversion."""
+    return wire.local_to_core(wire.local_to_bus(estimate, vehicle, f"agent-{vehicle}"))
 
 
 def _bus_global(estimate: GlobalEstimate) -> GlobalEstimate:
-    """What an agent receives over the bus: position, covariance, positive shares."""
-    return GlobalEstimate(
-        t_s=estimate.t_s,
-        x=np.array(estimate.x),
-        p=np.array(estimate.p),
-        beta=tuple(sorted((s, b) for s, b in estimate.beta if b > 0.0)),
-    )
+    """What an agent receives over the bus: the live mission's own conversion."""
+    return wire.global_to_core(wire.global_to_bus(estimate, "ground"))
 
 
 def _starts(plan: MissionPlan) -> list[FixedWingState]:
@@ -251,7 +240,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
                     local = states[i].local.estimate()
                     if local is not None:
                         next_estimate_t[i] = ts + setup.estimate_period_s
-                        gstate = ground_logic.hear_local(gstate, _bus_local(local))
+                        gstate = ground_logic.hear_local(gstate, _bus_local(local, i))
     summary = summarize(
         samples,
         cfg.radius_m,
