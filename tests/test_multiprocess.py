@@ -94,8 +94,11 @@ class Standoff:
 
     async def finish(self, timeout_s: float) -> int:
         """Wait for the process to exit (reading the rest of stdout); its exit code."""
-        async with asyncio.timeout(timeout_s):
-            out, _ = await self.proc.communicate()
+        try:
+            async with asyncio.timeout(timeout_s):
+                out, _ = await self.proc.communicate()
+        except TimeoutError:
+            pytest.fail(f"still running after {timeout_s} s:\n{self.transcript()}")
         self.lines += out.decode(errors="replace").splitlines()
         assert self.proc.returncode is not None
         return self.proc.returncode

@@ -76,6 +76,7 @@ class StopFlag:
     def __init__(self) -> None:
         self.reason = ""
         self.signum: signal.Signals | None = None
+        self.forced = False  # a second signal: stop at once
         self._event = asyncio.Event()
 
     @property
@@ -94,7 +95,8 @@ class StopFlag:
 
 @contextlib.contextmanager
 def stop_on_signals(stop: StopFlag) -> Iterator[None]:
-    """SIGINT/SIGTERM set ``stop`` (an orderly stop); a second one cancels the current task."""
+    """SIGINT/SIGTERM set ``stop`` (an orderly stop); a second one cancels the current task,
+    which the process functions turn into ``KeyboardInterrupt`` (see ``_forced``)."""
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     signals = (signal.SIGINT, signal.SIGTERM)
@@ -102,6 +104,7 @@ def stop_on_signals(stop: StopFlag) -> Iterator[None]:
     def on_signal(signum: signal.Signals) -> None:
         if stop.is_set and stop.signum is not None and task is not None:
             log.warning("second %s: stopping at once", signum.name)
+            stop.forced = True
             task.cancel()
             return
         stop.signum = signum
@@ -114,6 +117,17 @@ def stop_on_signals(stop: StopFlag) -> Iterator[None]:
     finally:
         for signum in signals:
             loop.remove_signal_handler(signum)
+
+
+@contextlib.contextmanager
+def _forced(stop: StopFlag) -> Iterator[None]:
+    """The cancellation a second signal causes leaves as ``KeyboardInterrupt`` (exit 130)."""
+    try:
+        yield
+    except asyncio.CancelledError:
+        if stop.forced:
+            raise KeyboardInterrupt from None
+        raise
 
 
 def _first_error(group: BaseExceptionGroup[Any]) -> BaseException:
@@ -220,6 +234,7 @@ async def run_ground(
     wall_start = time.monotonic()
     try:
         async with AsyncExitStack() as stack:
+            stack.enter_context(_forced(stop))
             stack.enter_context(eventlog)
             stack.enter_context(stop_on_signals(stop))
             events: EventSink = LoggingSink(eventlog)
@@ -408,6 +423,7 @@ async def run_agent(
     stop = StopFlag()
     result = AgentResult(vehicle, "")
     async with AsyncExitStack() as stack:
+        stack.enter_context(_forced(stop))
         eventlog = stack.enter_context(EventLog(out_dir / f"events-{name}.jsonl"))
         events: EventSink = LoggingSink(eventlog)
         stack.enter_context(stop_on_signals(stop))

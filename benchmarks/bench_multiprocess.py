@@ -1,0 +1,177 @@
+"""One mission two ways: in one process (``standoff fly``) and as 4 processes over mosquitto.
+
+    python -m benchmarks.bench_multiprocess [CONFIG] [--out DIR] [--broker URL]
+
+Flies CONFIG (default: the paper's section 5.2 mission, ``configs/hil.toml``) on the built-in
+simulator first with ``run_mission`` (in-process bus), then as ``standoff ground --sitl`` plus
+one ``standoff agent`` per vehicle, each a process of its own, over a mosquitto started on a free
+loopback port (or ``--broker``). Prints the summary figures side by side with their ratio
+(multi-process / in-process): the gather + adjust times from the tracking command, and the RMS
+distance and spacing errors per part of the run. The issue's target is every ratio within 10 %.
+Each run takes about as long as ``standoff fly`` (2-3 min of wall time for the default).
+"""
+
+import argparse
+import asyncio
+import contextlib
+import json
+import math
+import signal
+import sys
+import tempfile
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+from app.config import load_config, resolve_config
+from app.mission_config import MissionConfig
+from app.runtime.mission import build_plan, run_mission
+from sitl.ports import find_free_udp_base_port
+
+STARTUP_TIMEOUT_S = 60.0
+
+
+async def in_process(config_name: str, out: Path) -> dict[str, Any]:
+    config = load_config(config_name, MissionConfig).model_copy(update={"bus": None})
+    plan = build_plan(config)
+    result = await run_mission(plan, out, base_port=find_free_udp_base_port(plan.count))
+    return result.summary
+
+
+@contextlib.asynccontextmanager
+async def standoff(*args: str, log: Path) -> AsyncIterator[asyncio.subprocess.Process]:
+    """``python -m app ARGS`` with stdout piped (readiness lines) and stderr to ``log``."""
+    with log.open("wb") as err:
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "app", *args, stdout=asyncio.subprocess.PIPE, stderr=err
+        )
+        try:
+            yield proc
+        finally:
+            if proc.returncode is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    async with asyncio.timeout(20.0):
+                        await proc.communicate()
+                except TimeoutError:
+                    proc.kill()
+                    await proc.wait()
+
+
+async def wait_line(proc: asyncio.subprocess.Process, needle: str) -> None:
+    assert proc.stdout is not None
+    async with asyncio.timeout(STARTUP_TIMEOUT_S):
+        while True:
+            line = await proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"process exited before printing {needle!r}")
+            if needle.encode() in line:
+                return
+
+
+async def multi_process(config_name: str, out: Path, broker: str) -> dict[str, Any]:
+    """Agents first (each listens on its vehicle's port), then the ground with the simulator."""
+    config = load_config(config_name, MissionConfig)
+    n = config.vehicles
+    base_port = find_free_udp_base_port(n)
+    path = str(resolve_config(config_name))
+    common = [path, "--broker", broker, "--base-port", str(base_port), "--out", str(out)]
+    async with contextlib.AsyncExitStack() as stack:
+        agents = []
+        for i in range(n):
+            agents.append(
+                await stack.enter_async_context(
+                    standoff("agent", "--vehicle", str(i), *common, log=out / f"agent-{i}.err")
+                )
+            )
+        for i, agent in enumerate(agents):
+            await wait_line(agent, f"waiting for vehicle {i + 1}")
+        ground = await stack.enter_async_context(
+            standoff("ground", *common, "--sitl", "--quiet", log=out / "ground.err")
+        )
+        await ground.communicate()
+        for agent in agents:
+            await agent.communicate()
+        codes = [agent.returncode for agent in agents]
+    if ground.returncode != 0 or any(codes):
+        raise RuntimeError(
+            f"ground exited {ground.returncode}, agents {codes}: see the .err files in {out}"
+        )
+    summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
+    return summary
+
+
+@contextlib.contextmanager
+def broker_url(given: str | None, workdir: Path) -> Iterator[str]:
+    if given is not None:
+        yield given
+        return
+    from tests.mosquitto import Mosquitto  # the test helper starts a throwaway broker
+
+    broker = Mosquitto(workdir)
+    broker.start()
+    try:
+        yield broker.url
+    finally:
+        broker.stop()
+
+
+def figures(summary: dict[str, Any]) -> dict[str, float | None]:
+    """The compared figures of one run, by name."""
+    conv = summary["convergence"]
+    out: dict[str, float | None] = {
+        "on the circle (s from command)": conv.get("time_to_circle_s"),
+        "spaced (s from command)": conv.get("time_to_spacing_s"),
+        "gather + adjust (s from command)": conv.get("time_to_formation_s"),
+    }
+    parts = summary["parts"]
+    track = [p["team"]["start_s"] for k, p in parts.items() if k.startswith("track")]
+    out["track starts (s from command)"] = min(track) if track else None
+    for key, part in parts.items():
+        if key == "standby":
+            continue
+        team = part["team"]
+        out[f"{key} RMS distance (m)"] = team.get("distance_error_m", {}).get("rms")
+        out[f"{key} RMS spacing (deg)"] = team.get("spacing_error_deg", {}).get("rms")
+    out["wall time (s)"] = summary.get("wall_s")
+    return out
+
+
+def _num(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:9.2f}"
+
+
+def table(one: dict[str, Any], multi: dict[str, Any]) -> str:
+    a, b = figures(one), figures(multi)
+    names = list(a) + [k for k in b if k not in a]
+    width = max(len(k) for k in names)
+    lines = [f"{'figure':<{width}}  {'1 process':>9}  {'4 procs':>9}  {'ratio':>6}"]
+    for name in names:
+        x, y = a.get(name), b.get(name)
+        ratio = "-"
+        if x is not None and y is not None and math.isfinite(x) and math.isfinite(y) and x != 0:
+            ratio = f"{y / x:6.2f}"
+        lines.append(f"{name:<{width}}  {_num(x):>9}  {_num(y):>9}  {ratio:>6}")
+    return "\n".join(lines)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_multiprocess")
+    parser.add_argument("config", nargs="?", default="hil")
+    parser.add_argument("--out", type=Path, help="keep both run folders here")
+    parser.add_argument("--broker", help="an MQTT URL; default: start a mosquitto on loopback")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench-mp-") as tmp:
+        root = args.out or Path(tmp)
+        print(f"mission {args.config}: in one process ...", flush=True)
+        one = asyncio.run(in_process(args.config, root / "one-process"))
+        with broker_url(args.broker, Path(tmp)) as url:
+            print(f"mission {args.config}: ground + agents over {url} ...", flush=True)
+            (root / "multi-process").mkdir(parents=True, exist_ok=True)  # the agents' logs
+            multi = asyncio.run(multi_process(args.config, root / "multi-process", url))
+    print(table(one, multi))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
