@@ -26,12 +26,18 @@ Fraction = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
 
 
 class GuidanceConfig(StrictModel):
-    """``law``: proposed (optimal c + inverse field), frew (c = 2) or fixed (``c``)."""
+    """``law``: proposed (optimal c + inverse field), frew (c = 2) or fixed (``c``), flown to
+    the circle (gather, adjust). In the track stage the inverse-field switch is off and
+    ``track_law`` / ``track_orbit_plan`` apply: ``circle`` is the paper's orbit, ``ellipse``
+    the flyable orbit planned around a target too fast for the circle (docs/guidance.md);
+    ``track_law = "paper"`` flies the track stage exactly like the approach."""
 
     law: Literal["proposed", "frew", "fixed"] = "proposed"
     c: Positive | None = None
     feed_forward: bool = True
     curvature_margin: Fraction = 1.0
+    track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
+    track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
 
     @model_validator(mode="after")
     def _fixed_needs_c(self) -> "GuidanceConfig":

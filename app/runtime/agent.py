@@ -75,6 +75,10 @@ class VehicleAgent:
         self._next_offboard_retry_t = -math.inf
         self._last_t = 0.0
 
+    def stand_down(self) -> None:
+        """Stop commanding the vehicle (the mission is about to put it in hold)."""
+        self.state = logic.set_holding(self.state, True)
+
     async def run(self) -> None:
         v = self.params.vehicle
         async with (

@@ -30,7 +30,7 @@ from app.core.agent import AgentParams, GuidanceParams, PhaseParams, VehicleEnve
 from app.core.ground import GroundParams
 from app.core.mission_agent import MissionAgentParams
 from app.core.stage import StageParams
-from app.errors import ConfigError
+from app.errors import ConfigError, LinkError
 from app.estimator_config import load_estimator
 from app.mission_config import MissionConfig
 from app.report.mission_plots import plot_mission
@@ -96,6 +96,12 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             curvature_margin=g.curvature_margin,
         )
         phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
+        track_guidance = replace(
+            guidance,
+            law=g.law if g.track_law == "paper" else g.track_law,
+            inverse_field=False,
+            orbit_plan=g.track_orbit_plan,
+        )
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
         estimator = load_estimator(config.estimator.config)
         local, main = estimator.local, estimator.main
@@ -108,7 +114,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 standby_north_m=config.standby.north_m,
                 local=local,
                 main=main if main.feedback != "none" else None,
-                track=AgentParams(i, envelope, replace(guidance, inverse_field=False), phase),
+                track=AgentParams(i, envelope, track_guidance, phase),
                 use_target_accel=config.estimator.use_target_accel,
             )
             for i in range(n)
@@ -244,6 +250,15 @@ async def record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
                 mode=f.flight_mode.lower(),
             )
         )
+
+
+async def hold_all(links: dict[int, VehicleLink], events: EventSink, t_s: float) -> None:
+    """Put every vehicle in hold (a refusal is logged, not raised: the others still hold)."""
+    for i, link in links.items():
+        try:
+            await link.hold()
+        except LinkError as exc:
+            events.emit("hold_refused", t_s, vehicle=i, reason=str(exc))
 
 
 async def run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -> None:
@@ -401,6 +416,11 @@ async def run_mission(
                     if hooks:
                         helpers.append(tg.create_task(run_hooks(hooks, ctx), name="hooks"))
                     await ground.run()
+                    # the end: hold every vehicle while its agent still streams setpoints, so
+                    # no autopilot sees offboard setpoints stop before it is told to hold
+                    for agent in agents:
+                        agent.stand_down()
+                    await hold_all(links, events, ground.state.mission_t_s)
                     for task in helpers:
                         task.cancel()
             except asyncio.CancelledError:
