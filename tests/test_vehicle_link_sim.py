@@ -350,16 +350,20 @@ async def test_px4_fixed_wing_adapter_is_chosen_and_flies_the_line_setpoints():
         assert type(command).__name__ == "LineCommand"
 
 
-async def test_px4_without_parameters_is_refused_before_take_off():
-    config = sim_config(1, speedup=SPEEDUP)
+async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off():
+    # the simulator answers PX4's parameter protocol; set up to return on offboard loss, the
+    # PX4 adapter reads COM_OBL_RC_ACT and sets it to hold (5) before anything flies
+    config = sim_config(1, speedup=SPEEDUP, failsafe_action="return")
     async with asyncio.timeout(40.0), running_sim(config) as sim:
+        assert sim.vehicles[0].failsafe_action == "return"
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
             hub.link(1, LinkConfig(LIMITS)) as link,
         ):
-            with pytest.raises(LinkError, match="cannot check/set COM_OBL_RC_ACT"):
-                await link.wait_ready(10.0)
-        assert sim.truth().vehicles[0].armed is False
+            await link.wait_ready(10.0)
+            assert link.autopilot_name == "px4-fixed-wing"
+            assert sim.vehicles[0].failsafe_action == "hold"
+            assert sim.truth().vehicles[0].armed is False
 
 
 async def test_one_link_per_vehicle_and_missing_vehicles_time_out():

@@ -2,6 +2,7 @@
 
 import argparse
 import asyncio
+import contextlib
 import datetime as dt
 import math
 from pathlib import Path
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     console.print(f"standoff fly: {config.name}, {plan.count} vehicles, run folder {out}")
     view = LiveView(console) if not args.quiet else None
-    with view if view is not None else _Null():
+    with view if view is not None else contextlib.nullcontext():
         result = asyncio.run(
             run_mission(
                 plan,
@@ -80,24 +81,17 @@ def run(args: argparse.Namespace) -> int:
                 on_snapshot=view.update if view is not None else None,
             )
         )
-    conv = result.summary["convergence"]
-    console.print(_report(result.summary, conv), highlight=False, markup=False)
+    console.print(report(result.summary), highlight=False, markup=False)
     return 0
-
-
-class _Null:
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None
 
 
 def _fmt(value: object, spec: str = ".1f") -> str:
     return format(value, spec) if isinstance(value, float) and math.isfinite(value) else "-"
 
 
-def _report(summary: dict[str, object], conv: object) -> str:
+def report(summary: dict[str, object]) -> str:
+    """The run's headline figures, a few lines for the terminal (the full set: summary.json)."""
+    conv = summary.get("convergence")
     lines = [
         f"wall time {_fmt(summary['wall_s'])} s, mission time {_fmt(summary['mission_t_s'])} s"
     ]

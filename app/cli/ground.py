@@ -2,6 +2,7 @@
 
 import argparse
 import asyncio
+import contextlib
 import sys
 from pathlib import Path
 
@@ -9,7 +10,7 @@ from rich.console import Console
 
 from app.adapters.bus import BrokerUrl
 from app.adapters.live_view import LiveView
-from app.cli.fly import DEFAULT_CONFIG, _Null, _report, default_out_dir
+from app.cli.fly import DEFAULT_CONFIG, default_out_dir, report
 from app.config import load_config
 from app.errors import ConfigError
 from app.mission_config import MissionConfig
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
     notify(f"{config.name}, {plan.count} vehicles, run folder {out}")
     view = LiveView(console) if not args.quiet else None
-    with view if view is not None else _Null():
+    with view if view is not None else contextlib.nullcontext():
         result = asyncio.run(
             run_ground(
                 plan,
@@ -98,9 +99,7 @@ def run(args: argparse.Namespace) -> int:
                 notify=notify,
             )
         )
-    console.print(
-        _report(result.summary, result.summary["convergence"]), highlight=False, markup=False
-    )
+    console.print(report(result.summary), highlight=False, markup=False)
     if result.interrupted:
         notify("interrupted: the agents were told to shut down; partial results written")
         return 130

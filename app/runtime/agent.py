@@ -101,7 +101,11 @@ class VehicleAgent:
     # --- the control path -----------------------------------------------------------------
 
     async def _control(self) -> None:
-        async for frame in self._link.telemetry():
+        async for queued in self._link.telemetry():
+            # steer on the newest frame: frames that queued up while the loop was busy are
+            # history, and acting on each in turn would only add lag
+            newest = self._link.latest
+            frame = newest if newest is not None and newest.t_s > queued.t_s else queued
             t = frame.t_s
             if t <= self._last_t and self.counters.ticks > 0:
                 continue  # another message of the same instant: one tick per vehicle time

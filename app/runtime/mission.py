@@ -462,7 +462,9 @@ def write_outputs(
             "mission": plan.config.name,
             "vehicles": plan.count,
             "end_t_s": plan.end_t_s,
-            "mission_t_s": ground.state.mission_t_s if ground is not None else 0.0,
+            "mission_t_s": ground.state.mission_t_s
+            if ground is not None and math.isfinite(ground.state.mission_t_s)
+            else None,
             "wall_s": wall_s,
             "interrupted": interrupted,
             "events": dict(eventlog.counts),
