@@ -355,7 +355,8 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
     # PX4 adapter reads COM_OBL_RC_ACT and sets it to hold (5) before anything flies
     config = sim_config(1, speedup=SPEEDUP, failsafe_action="return")
     async with asyncio.timeout(40.0), running_sim(config) as sim:
-        assert sim.vehicles[0].failsafe_action == "return"
+        action_before: str = sim.vehicles[0].failsafe_action
+        assert action_before == "return"
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
             hub.link(1, LinkConfig(LIMITS)) as link,
