@@ -8,6 +8,7 @@ from typing import Annotated, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from app.core.agent import VehicleEnvelope
 from sitl.fixedwing import FixedWingLimits, FixedWingState
 from sitl.target import Leg, Maneuver, TargetPath
 
@@ -41,6 +42,17 @@ class LimitsConfig(StrictModel):
                 f"{self.min_speed_m_s}, {self.cruise_speed_m_s}, {self.max_speed_m_s}"
             )
         return self
+
+    def envelope(self) -> VehicleEnvelope:
+        """What guidance may ask of the vehicle (the agent's view of these limits)."""
+        return VehicleEnvelope(
+            cruise_speed_m_s=self.cruise_speed_m_s,
+            min_speed_m_s=self.min_speed_m_s,
+            max_speed_m_s=self.max_speed_m_s,
+            max_accel_m_s2=self.max_accel_m_s2,
+            max_course_rate_rad_s=self.max_course_rate_rad_s,
+            course_gain_per_s=self.course_gain_per_s,
+        )
 
     def build(self) -> FixedWingLimits:
         return FixedWingLimits(

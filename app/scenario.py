@@ -18,7 +18,7 @@ from app.config_models import (
     TargetConfig,
     VehicleStartConfig,
 )
-from app.core.agent import AgentParams, GuidanceParams, PhaseParams, VehicleEnvelope
+from app.core.agent import AgentParams, GuidanceParams, PhaseParams
 from app.runtime.fastsim import SimulationSetup
 
 
@@ -58,14 +58,7 @@ class ScenarioConfig(StrictModel):
 def build_setup(scenario: ScenarioConfig) -> SimulationSetup:
     """The ``SimulationSetup`` a scenario describes (raises ValueError on inconsistent values)."""
     lim = scenario.limits
-    envelope = VehicleEnvelope(
-        cruise_speed_m_s=lim.cruise_speed_m_s,
-        min_speed_m_s=lim.min_speed_m_s,
-        max_speed_m_s=lim.max_speed_m_s,
-        max_accel_m_s2=lim.max_accel_m_s2,
-        max_course_rate_rad_s=lim.max_course_rate_rad_s,
-        course_gain_per_s=lim.course_gain_per_s,
-    )
+    envelope = lim.envelope()
     g = scenario.guidance
     guidance = GuidanceParams(
         radius_m=scenario.radius_m,

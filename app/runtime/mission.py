@@ -26,7 +26,7 @@ from app.adapters.tlog import TlogSample, TlogWriter
 from app.adapters.vehicle.autopilots import SetpointLimits
 from app.adapters.vehicle.link import CourseSpeedCommand, GeodeticOrigin, VehicleLink
 from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
-from app.core.agent import AgentParams, GuidanceParams, PhaseParams, VehicleEnvelope
+from app.core.agent import AgentParams, GuidanceParams, PhaseParams
 from app.core.ground import GroundParams
 from app.core.mission_agent import MissionAgentParams
 from app.core.stage import StageParams
@@ -78,14 +78,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
     lim = config.limits
     try:
         target = config.target.build()
-        envelope = VehicleEnvelope(
-            lim.cruise_speed_m_s,
-            lim.min_speed_m_s,
-            lim.max_speed_m_s,
-            lim.max_accel_m_s2,
-            lim.max_course_rate_rad_s,
-            lim.course_gain_per_s,
-        )
+        envelope = lim.envelope()
         g = config.guidance
         guidance = GuidanceParams(
             radius_m=config.radius_m,
