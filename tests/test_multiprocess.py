@@ -221,7 +221,8 @@ async def test_sigterm_holds_the_vehicle_and_sigint_stops_the_ground(
         )
         await agent.wait_for("vehicle 1 under offboard control", 60.0)
         agent.proc.send_signal(signal.SIGTERM)
-        assert await agent.finish(30.0) == 128 + signal.SIGTERM, agent.transcript()
+        # on a loaded machine the MQTT unsubscribes of a stopping agent take a while
+        assert await agent.finish(90.0) == 128 + signal.SIGTERM, agent.transcript()
         ground.proc.send_signal(signal.SIGINT)
         assert await ground.finish(30.0) == 130, ground.transcript()
 
