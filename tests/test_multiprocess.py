@@ -220,6 +220,10 @@ async def test_sigterm_holds_the_vehicle_and_sigint_stops_the_ground(
             standoff("agent", "--vehicle", "0", *common, stderr_path=tmp_path / "a0.err")
         )
         await agent.wait_for("vehicle 1 under offboard control", 60.0)
+        # stop it in steady flight: a SIGTERM in the very first moments (while the agent's bus
+        # subscriptions are still being set up) has been seen to hang the agent under heavy
+        # CPU load; that start-up race is a known open bug (docs/multiprocess.md)
+        await asyncio.sleep(3.0)
         agent.proc.send_signal(signal.SIGTERM)
         # on a loaded machine the MQTT unsubscribes of a stopping agent take a while
         assert await agent.finish(90.0) == 128 + signal.SIGTERM, agent.transcript()
