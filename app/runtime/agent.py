@@ -17,6 +17,7 @@ from app.adapters.bus import Bus, Subscription, topics
 from app.adapters.bus import messages as bus
 from app.adapters.vehicle.link import (
     CourseSpeedCommand,
+    LeftOffboard,
     LinkLost,
     LinkRestored,
     OffboardLostError,
@@ -284,6 +285,8 @@ class VehicleAgent:
                     )
                 case LinkRestored():
                     self._events.emit("link_restored", event.t_s, vehicle=self.params.vehicle)
+                case LeftOffboard() if self.state.holding:
+                    pass  # the hold this agent stood down for, not the vehicle leaving on its own
                 case _:
                     self._events.emit(
                         type(event).__name__,
