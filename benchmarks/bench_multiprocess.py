@@ -9,6 +9,13 @@ loopback port (or ``--broker``). Prints the summary figures side by side with th
 (multi-process / in-process): the gather + adjust times from the tracking command, and the RMS
 distance and spacing errors per part of the run. The issue's target is every ratio within 10 %.
 Each run takes about as long as ``standoff fly`` (2-3 min of wall time for the default).
+
+One live run varies from the next by about as much as the two ways differ (the simulator runs
+in real time at the config's speed-up, so the moment each estimate and setpoint lands moves
+from run to run, and the state at a target manoeuvre is sensitive to it). ``--pairs N`` flies N
+pairs, interleaved (one process, then four, ...), and compares the means; beside the ratio it
+prints each way's run-to-run spread (sample standard deviation over mean), which says how far
+apart two identical set-ups already are.
 """
 
 import argparse
@@ -17,6 +24,7 @@ import contextlib
 import json
 import math
 import signal
+import statistics
 import sys
 import tempfile
 from collections.abc import AsyncIterator, Iterator
@@ -141,35 +149,66 @@ def _num(value: float | None) -> str:
     return "-" if value is None or not math.isfinite(value) else f"{value:9.2f}"
 
 
-def table(one: dict[str, Any], multi: dict[str, Any]) -> str:
-    a, b = figures(one), figures(multi)
-    names = list(a) + [k for k in b if k not in a]
+def _finite(values: list[float | None]) -> list[float]:
+    return [v for v in values if v is not None and math.isfinite(v)]
+
+
+def _spread(values: list[float]) -> str:
+    if len(values) < 2 or statistics.fmean(values) == 0.0:
+        return "-"
+    return f"{statistics.stdev(values) / abs(statistics.fmean(values)):6.0%}"
+
+
+def table(ones: list[dict[str, Any]], multis: list[dict[str, Any]]) -> str:
+    """Means of each figure over the runs of each way, their ratio and each way's spread."""
+    a = [figures(s) for s in ones]
+    b = [figures(s) for s in multis]
+    names: list[str] = []
+    for row in a + b:
+        names += [k for k in row if k not in names]
     width = max(len(k) for k in names)
-    lines = [f"{'figure':<{width}}  {'1 process':>9}  {'4 procs':>9}  {'ratio':>6}"]
+    lines = [
+        f"{'figure':<{width}}  {'1 process':>9}  {'4 procs':>9}  {'ratio':>6}  "
+        f"{'spread 1':>8}  {'spread 4':>8}"
+    ]
     for name in names:
-        x, y = a.get(name), b.get(name)
+        xs = _finite([row.get(name) for row in a])
+        ys = _finite([row.get(name) for row in b])
+        x = statistics.fmean(xs) if xs else None
+        y = statistics.fmean(ys) if ys else None
         ratio = "-"
-        if x is not None and y is not None and math.isfinite(x) and math.isfinite(y) and x != 0:
+        if x is not None and y is not None and x != 0:
             ratio = f"{y / x:6.2f}"
-        lines.append(f"{name:<{width}}  {_num(x):>9}  {_num(y):>9}  {ratio:>6}")
+        lines.append(
+            f"{name:<{width}}  {_num(x):>9}  {_num(y):>9}  {ratio:>6}  "
+            f"{_spread(xs):>8}  {_spread(ys):>8}"
+        )
     return "\n".join(lines)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_multiprocess")
     parser.add_argument("config", nargs="?", default="hil")
-    parser.add_argument("--out", type=Path, help="keep both run folders here")
+    parser.add_argument("--out", type=Path, help="keep the run folders here")
     parser.add_argument("--broker", help="an MQTT URL; default: start a mosquitto on loopback")
+    parser.add_argument("--pairs", type=int, default=1, help="pairs of runs to average (1)")
     args = parser.parse_args()
+    if args.pairs < 1:
+        parser.error("--pairs must be at least 1")
+    ones: list[dict[str, Any]] = []
+    multis: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench-mp-") as tmp:
         root = args.out or Path(tmp)
-        print(f"mission {args.config}: in one process ...", flush=True)
-        one = asyncio.run(in_process(args.config, root / "one-process"))
         with broker_url(args.broker, Path(tmp)) as url:
-            print(f"mission {args.config}: ground + agents over {url} ...", flush=True)
-            (root / "multi-process").mkdir(parents=True, exist_ok=True)  # the agents' logs
-            multi = asyncio.run(multi_process(args.config, root / "multi-process", url))
-    print(table(one, multi))
+            for k in range(args.pairs):
+                print(f"pair {k + 1}/{args.pairs}: {args.config} in one process ...", flush=True)
+                ones.append(asyncio.run(in_process(args.config, root / f"one-process-{k}")))
+                print(f"pair {k + 1}/{args.pairs}: ground + agents over {url} ...", flush=True)
+                folder = root / f"multi-process-{k}"
+                folder.mkdir(parents=True, exist_ok=True)  # the agents' logs
+                multis.append(asyncio.run(multi_process(args.config, folder, url)))
+    print(f"means over {args.pairs} pair(s); spread = standard deviation / mean over the runs")
+    print(table(ones, multis))
     return 0
 
 
