@@ -52,6 +52,7 @@ class LimitsConfig(StrictModel):
             max_accel_m_s2=self.max_accel_m_s2,
             max_course_rate_rad_s=self.max_course_rate_rad_s,
             course_gain_per_s=self.course_gain_per_s,
+            speed_gain_per_s=self.speed_gain_per_s,
         )
 
     def build(self) -> FixedWingLimits:

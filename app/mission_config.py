@@ -30,7 +30,11 @@ class GuidanceConfig(StrictModel):
     the circle (gather, adjust). In the track stage the inverse-field switch is off and
     ``track_law`` / ``track_orbit_plan`` apply: ``circle`` is the paper's orbit, ``ellipse``
     the flyable orbit planned around a target too fast for the circle (docs/guidance.md);
-    ``track_law = "paper"`` flies the track stage exactly like the approach."""
+    ``track_law = "paper"`` flies the track stage exactly like the approach.
+    ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
+    moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
+    ``latency_s``: the time from a telemetry frame to its command acting on the vehicle; each
+    agent steers on where its vehicle and the target will be by then (0 s: the paper's loop)."""
 
     law: Literal["proposed", "frew", "fixed"] = "proposed"
     c: Positive | None = None
@@ -38,6 +42,8 @@ class GuidanceConfig(StrictModel):
     curvature_margin: Fraction = 1.0
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
+    track_speed_cap: bool = False
+    latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.0
 
     @model_validator(mode="after")
     def _fixed_needs_c(self) -> "GuidanceConfig":

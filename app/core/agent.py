@@ -41,10 +41,12 @@ class VehicleEnvelope:
     max_accel_m_s2: float
     max_course_rate_rad_s: float
     course_gain_per_s: float = 1.0
+    speed_gain_per_s: float = 1.0
 
     def __post_init__(self) -> None:
         _require_positive(
             "VehicleEnvelope",
+            speed_gain_per_s=self.speed_gain_per_s,
             cruise_speed_m_s=self.cruise_speed_m_s,
             min_speed_m_s=self.min_speed_m_s,
             max_speed_m_s=self.max_speed_m_s,
@@ -75,6 +77,11 @@ class GuidanceParams:
     circle, the field converges to the flyable ellipse closest to it, aligned with the target's
     velocity; ``guidance.planned_orbit_axes`` with ``plan_margin`` of the course-rate limit and
     semi-axes within ``plan_max_stretch`` r_d of r_d; the circle while it is flyable).
+    ``speed_cap`` (improvement): around a moving target, the ground speed is capped where the
+    orbit (the circle, or the planned one) would need more than ``speed_cap_margin`` of the
+    course-rate limit at the speed the phase law wants (``guidance.orbit_speed_cap``: flying
+    against the target's motion, e.g. at most 11.2 m/s on the 90 m circle around a 3 m/s
+    target), braking ahead of such a place at ``speed_cap_brake`` of the envelope's acceleration.
     """
 
     radius_m: float
@@ -92,6 +99,9 @@ class GuidanceParams:
     orbit_plan: OrbitPlan = "circle"
     plan_margin: float = 1.0
     plan_max_stretch: float = 0.5
+    speed_cap: bool = False
+    speed_cap_margin: float = 0.95
+    speed_cap_brake: float = 0.7
     #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
     orbit_sign: int = field(init=False, repr=False)
     #: whether the ILVF switch is used (derived from ``law`` and ``inverse_field``)
@@ -128,6 +138,10 @@ class GuidanceParams:
             raise ValueError(
                 f"GuidanceParams.plan_max_stretch must be in (0, 1), got {self.plan_max_stretch!r}"
             )
+        for name in ("speed_cap_margin", "speed_cap_brake"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 < value <= 1.0):
+                raise ValueError(f"GuidanceParams.{name} must be in (0, 1], got {value!r}")
         uses_inverse = self.law == "proposed" if self.inverse_field is None else self.inverse_field
         object.__setattr__(self, "orbit_sign", 1 if self.orbit == "ccw" else -1)
         object.__setattr__(self, "uses_inverse_field", uses_inverse)
@@ -245,6 +259,43 @@ class AgentEvent:
 
 
 _NO_EVENTS: tuple[AgentEvent, ...] = ()
+
+
+def predict_own(
+    own: OwnTelemetry,
+    course_cmd_rad: float,
+    speed_cmd_m_s: float,
+    envelope: VehicleEnvelope,
+    dt_s: float,
+) -> OwnTelemetry:
+    """Where the eq. (2) vehicle will be after ``dt_s`` s under the held (course, speed)
+    command: course rate k * wrap(command - course) saturated at the envelope's limit and held,
+    acceleration ``speed_gain_per_s`` * (command - speed) saturated and held (the command
+    clamped to the envelope, the speed never past it), position along the exact arc. The
+    latency compensation of ``mission_agent.control`` steers on this. ``dt_s = 0`` returns
+    ``own`` itself."""
+    if dt_s == 0.0:
+        return own
+    if not (math.isfinite(dt_s) and dt_s > 0.0):
+        raise ValueError(f"dt_s must be finite and >= 0, got {dt_s!r}")
+    w = envelope.max_course_rate_rad_s
+    rate = envelope.course_gain_per_s * guidance._wrap_pi(course_cmd_rad - own.course_rad)
+    rate = min(max(rate, -w), w)
+    target = min(max(speed_cmd_m_s, envelope.min_speed_m_s), envelope.max_speed_m_s)
+    a_max = envelope.max_accel_m_s2
+    accel = min(max(envelope.speed_gain_per_s * (target - own.speed_m_s), -a_max), a_max)
+    speed = own.speed_m_s + accel * dt_s
+    speed = min(speed, target) if accel > 0.0 else max(speed, target)
+    mean_speed = 0.5 * (own.speed_m_s + speed)
+    c0 = own.course_rad
+    c1 = c0 + rate * dt_s
+    if abs(rate * dt_s) > 1e-9:
+        d_east = mean_speed * (math.cos(c0) - math.cos(c1)) / rate
+        d_north = mean_speed * (math.sin(c1) - math.sin(c0)) / rate
+    else:
+        d_east = mean_speed * math.sin(c0) * dt_s
+        d_north = mean_speed * math.cos(c0) * dt_s
+    return OwnTelemetry(own.east_m + d_east, own.north_m + d_north, guidance._wrap_pi(c1), speed)
 
 
 def _check_inputs(inputs: AgentInputs) -> None:
@@ -427,8 +478,11 @@ def agent_step(
     ):
         ground_course, ground_rate = rel_course, rel_rate
     else:
+        max_speed = env.max_speed_m_s
+        if g.speed_cap:
+            max_speed = _speed_cap(x, y, math.hypot(vx, vy), tgt, params)
         ground_course, ground_rate, speed_cmd = _ground_course(
-            rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed
+            rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed, max_speed
         )
 
     cmd_course = guidance._course_command(
@@ -499,6 +553,7 @@ def _ground_course(
     speed_cmd: float,
     env: VehicleEnvelope,
     relative_speed: bool,
+    max_speed_m_s: float,
 ) -> tuple[float, float, float]:
     """Eq. (15): ground velocity v_g = v_t + lambda d for the commanded speed
     (``guidance.moving_target_velocity``), its course and the course's rate (d turning at
@@ -511,7 +566,7 @@ def _ground_course(
         tgt.v_north_m_s,
         speed_cmd,
         env.min_speed_m_s,
-        env.max_speed_m_s,
+        max_speed_m_s,
         relative_speed,
     )
     # d/dt d = rel_rate * (cos chi, -sin chi)
@@ -530,7 +585,53 @@ def _ground_course(
     course = math.atan2(gx, gy)
     rate = (gy * ax - gx * ay) / g2
     # (clamped again only against rounding: _moving_target_velocity already scaled it in)
-    return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), env.max_speed_m_s)
+    return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), max_speed_m_s)
+
+
+def _orbit_axes(speed_m_s: float, params: AgentParams) -> tuple[float, float]:
+    """Semi-axes (along, across the target's motion) of the orbit flown around a target moving
+    at ``speed_m_s``: the planned one with ``orbit_plan = "ellipse"``, else the circle."""
+    g, env = params.guidance, params.envelope
+    if g.orbit_plan == "ellipse" and speed_m_s >= 0.5:
+        return guidance.planned_orbit_axes(
+            g.radius_m,
+            speed_m_s,
+            env.min_speed_m_s,
+            env.max_course_rate_rad_s,
+            g.plan_margin,
+            g.plan_max_stretch,
+        )
+    return g.radius_m, g.radius_m
+
+
+def _speed_cap(x: float, y: float, rel_speed: float, tgt: TargetInfo, params: AgentParams) -> float:
+    """The ground-speed limit of ``GuidanceParams.speed_cap``, within the envelope."""
+    g, env = params.guidance, params.envelope
+    speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
+    if speed < 0.1:
+        return env.max_speed_m_s
+    a, b = _orbit_axes(speed, params)
+    profile = guidance.orbit_speed_profile(
+        a,
+        b,
+        speed,
+        env.min_speed_m_s,
+        env.max_speed_m_s,
+        g.speed_cap_margin * env.max_course_rate_rad_s,
+    )
+    cap = guidance.orbit_speed_cap(
+        x,
+        y,
+        rel_speed,
+        g.orbit_sign,
+        tgt.v_east_m_s / speed,
+        tgt.v_north_m_s / speed,
+        a,
+        b,
+        profile,
+        g.speed_cap_brake * env.max_accel_m_s2,
+    )
+    return min(max(cap, env.min_speed_m_s), env.max_speed_m_s)
 
 
 def _relative_course(
@@ -547,18 +648,11 @@ def _relative_course(
     = "ellipse"``) the planned orbit around the target (``guidance.planned_orbit_axes``: the
     circle while it is flyable, else the flyable ellipse closest to it, aligned with the
     target's velocity)."""
-    g, env = params.guidance, params.envelope
+    g = params.guidance
     rd, sign = g.radius_m, g.orbit_sign
     speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
     if g.orbit_plan == "ellipse" and not inverse and speed >= 0.5:
-        a, b = guidance.planned_orbit_axes(
-            rd,
-            speed,
-            env.min_speed_m_s,
-            env.max_course_rate_rad_s,
-            g.plan_margin,
-            g.plan_max_stretch,
-        )
+        a, b = _orbit_axes(speed, params)
         if a != b:
             ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
             return guidance.ellipse_course_and_rate(x, y, vx, vy, rd, c, sign, ux, uy, a, b)

@@ -94,6 +94,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             law=g.law if g.track_law == "paper" else g.track_law,
             inverse_field=False,
             orbit_plan=g.track_orbit_plan,
+            speed_cap=g.track_speed_cap,
         )
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
         estimator = load_estimator(config.estimator.config)
@@ -109,6 +110,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 main=main if main.feedback != "none" else None,
                 track=AgentParams(i, envelope, track_guidance, phase),
                 use_target_accel=config.estimator.use_target_accel,
+                latency_s=g.latency_s,
             )
             for i in range(n)
         )
