@@ -59,3 +59,27 @@ def test_an_inactive_vehicle_is_left_out_of_spacing():
 def test_never_formed_gives_none():
     samples = [ring(t, 90.0, (0, 10, 20), (0.0, 0.0, 0.0), "adjust") for t in range(10)]
     assert summarize(samples, 90.0, 0.0)["convergence"]["time_to_formation_s"] is None
+
+
+def test_a_track_segment_reports_its_transient_apart():
+    """After a turn of the target the team is off the circle for a while: the segment's
+    time_to_circle_s is when every vehicle is back within the tolerance for hold_s, and its
+    settled figures are the errors from then on."""
+    errors = [30.0 - 3.0 * t if t < 10 else 0.5 for t in range(40)]
+    samples = [
+        ring(float(t), 90.0, (0, 120, 240), (e, -e, 0.0), "track", "B-C")
+        for t, e in enumerate(errors)
+    ]
+    team = summarize(samples, 90.0, 0.0, radius_tolerance_m=3.0, hold_s=5.0)["parts"]["track:B-C"][
+        "team"
+    ]
+    assert team["time_to_circle_s"] == 9.0  # |30 - 3t| <= 3 from t = 9 on
+    settled = team["settled"]["distance_error_m"]
+    assert settled["max_abs"] == pytest.approx(3.0)  # t = 9 itself
+    # two vehicles at +-3 m once, then +-0.5 m for 30 samples; the third on the circle
+    assert settled["rms"] == pytest.approx(math.sqrt((2 * 9.0 + 60 * 0.25) / 93))
+    assert team["distance_error_m"]["max_abs"] == pytest.approx(30.0)
+    never = [ring(float(t), 90.0, (0, 120, 240), (9.0, 0, 0), "track", "C-D") for t in range(9)]
+    part = summarize(never, 90.0, 0.0)["parts"]["track:C-D"]["team"]
+    assert part["time_to_circle_s"] is None
+    assert "settled" not in part

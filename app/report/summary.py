@@ -88,6 +88,29 @@ def _first_lasting(
     return start if start is not None and times and times[-1] >= end_t_s else None
 
 
+def _settling(
+    group: Sequence[TeamSample], radius_m: float, tolerance_m: float, hold_s: float
+) -> dict[str, object]:
+    """How a track segment began: the time from its start until every active vehicle stays
+    within ``tolerance_m`` of the circle for ``hold_s`` (``time_to_circle_s``, None if never),
+    and the distance and spacing errors from then to the segment's end (``settled``): the
+    segment's figures without the transient its start (a turn of the target) causes."""
+    near = [
+        bool(errs) and all(abs(e) <= tolerance_m for e in errs.values())
+        for errs in (s.distance_errors(radius_m) for s in group)
+    ]
+    t_on = _first_lasting([s.t_s for s in group], near, hold_s, math.inf)
+    if t_on is None:
+        return {"time_to_circle_s": None}
+    rest = [s for s in group if s.t_s >= t_on]
+    dist = [e for s in rest for e in s.distance_errors(radius_m).values()]
+    spacing = [math.degrees(e) for s in rest for e in s.spacing_errors().values()]
+    settled: dict[str, object] = {"distance_error_m": _stats(dist)}
+    if spacing:
+        settled["spacing_error_deg"] = _stats(spacing)
+    return {"time_to_circle_s": t_on - group[0].t_s, "settled": settled}
+
+
 def phase_key(sample: TeamSample) -> str:
     """Which part of the run a sample belongs to: the stage, and in track the target's segment."""
     if sample.stage == "track":
@@ -159,6 +182,8 @@ def summarize(
                 "position_m": _stats(est_pos)["rms"],
                 "velocity_m_s": _stats(est_vel)["rms"],
             }
+        if key.startswith("track:") and all_dist:
+            team.update(_settling(group, radius_m, radius_tolerance_m, hold_s))
         out_parts[key] = {"vehicles": vehicles, "team": team}
     after = [s for s in rows if s.t_s >= tracking_command_t_s and s.stage != "standby"]
     track_start = next((s.t_s for s in after if s.stage == "track"), math.inf)
