@@ -196,12 +196,15 @@ def control(
     state: MissionAgentState, t_s: float, own: OwnTelemetry, params: MissionAgentParams
 ) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
     """One tick: the command for the vehicle's telemetry ``own`` of time ``t_s``, computed for
-    the moment it will act, ``t_s + params.latency_s``."""
+    the moment it will act, ``t_s + params.latency_s``: its implied course rate is within the
+    limit for the course the vehicle will have then (against the reported one it may exceed it
+    by what the vehicle turns in ``latency_s``)."""
     if params.latency_s > 0.0:
         course, speed = state.last_command or (own.course_rad, own.speed_m_s)
-        own = predict_own(own, course, speed, params.agent.envelope, params.latency_s)
-        t_s += params.latency_s
-    state, command, events = _control(state, t_s, own, params)
+        ahead = predict_own(own, course, speed, params.agent.envelope, params.latency_s)
+        state, command, events = _control(state, t_s + params.latency_s, ahead, params)
+    else:
+        state, command, events = _control(state, t_s, own, params)
     return replace(state, last_command=(command.course_rad, command.speed_m_s)), command, events
 
 

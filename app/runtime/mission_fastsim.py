@@ -77,7 +77,8 @@ class MissionSimSetup:
 @dataclass
 class MissionSimResult:
     """The ground's samples (every control tick), every command sent (t, vehicle, course,
-    speed, implied course rate k * wrap(course cmd - course)), and the run's summary."""
+    speed, implied course rate k * wrap(course cmd - course) against the course the vehicle has
+    when the command starts to act), and the run's summary."""
 
     samples: list[TeamSample]
     commands: np.ndarray
@@ -149,7 +150,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     next_estimate_t = [-math.inf] * n
     next_mission_t = -math.inf
     last_stage = ""
-    pending: deque[list[tuple[float, float]]] = deque()
+    pending: deque[tuple[float, list[tuple[float, float]]]] = deque()
     held = [(v.course_rad, v.speed_m_s) for v in vehicles]
     samples: list[TeamSample] = []
     commands: list[tuple[float, int, float, float, float]] = []
@@ -210,12 +211,14 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
             own = OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
             states[i], command, aevents = logic.control(states[i], t, own, agents[i])
             events.extend((e.t_s, e.kind, f"vehicle {i}: {e.detail}") for e in aevents)
-            rate = k_gain * _wrap_pi(command.course_rad - v.course_rad)
-            commands.append((t, i, command.course_rad, command.speed_m_s, rate))
             out.append((command.course_rad, command.speed_m_s))
-        pending.append(out)
+        pending.append((t, out))
         if len(pending) > setup.latency_ticks:
-            held = pending.popleft()
+            sent_t, held = pending.popleft()
+            for i, ((course, speed), v) in enumerate(zip(held, vehicles, strict=True)):
+                # the course rate it asks of the vehicle it now acts on
+                rate = k_gain * _wrap_pi(course - v.course_rad)
+                commands.append((sent_t, i, course, speed, rate))
         if tick == ticks:
             break
         # 5. fly to the next tick; cameras and local estimates on the way
@@ -252,7 +255,9 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
 
 
 def track_figures(result: MissionSimResult, labels: Sequence[str]) -> dict[str, dict[str, float]]:
-    """Per track segment: RMS and max |distance error| (m), RMS and max |spacing error| (deg)."""
+    """Per track segment: RMS and max |distance error| (m), RMS and max |spacing error| (deg),
+    and when the team got back onto the circle (``settle_s`` from the segment's start) with the
+    RMS distance error from then on (``settled_dist_rms_m``)."""
     out: dict[str, dict[str, float]] = {}
     for label in labels:
         team = result.part(f"track:{label}")
@@ -265,5 +270,8 @@ def track_figures(result: MissionSimResult, labels: Sequence[str]) -> dict[str, 
         if "spacing_error_deg" in team:
             row["spacing_rms_deg"] = team["spacing_error_deg"]["rms"]
             row["spacing_max_deg"] = team["spacing_error_deg"]["max_abs"]
+        if team.get("time_to_circle_s") is not None:
+            row["settle_s"] = team["time_to_circle_s"]
+            row["settled_dist_rms_m"] = team["settled"]["distance_error_m"]["rms"]
         out[label] = row
     return out
