@@ -10,6 +10,7 @@ import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
+import aiomqtt
 import pytest
 
 from app.adapters.bus import (
@@ -22,6 +23,7 @@ from app.adapters.bus import (
     open_bus,
     topics,
 )
+from app.adapters.bus.mqtt import CancelSafeClient
 from app.errors import BusError, ConfigError
 from tests.mosquitto import Mosquitto, free_port, mosquitto_fixture  # noqa: F401
 from tests.test_bus_conformance import WAIT_S, observation, take
@@ -195,6 +197,55 @@ async def test_reconnect_back_off_grows_to_its_cap_on_the_injected_clock() -> No
             pass
     assert len(waits) >= 6
     assert waits[:6] == [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]
+
+
+@pytest.mark.parametrize(
+    "client_class",
+    [
+        CancelSafeClient,
+        pytest.param(
+            aiomqtt.Client,
+            marks=pytest.mark.xfail(
+                sys.version_info < (3, 12),
+                reason="asyncio.wait_for swallows the cancellation (CPython gh-86296)",
+                strict=True,
+            ),
+        ),
+    ],
+)
+async def test_a_wait_for_an_acknowledgement_lets_a_cancellation_through(
+    client_class: type[aiomqtt.Client],
+) -> None:
+    # The acknowledgement arrives and the waiting task is cancelled in the same moment (each
+    # interleaving of the two within a few loop turns): once cancel() is accepted, the task
+    # must end cancelled, not carry on with its loop as if nothing had happened.
+    client = client_class("127.0.0.1", free_port())  # never connected: only its wait is used
+    for turns in range(4):
+        acked = asyncio.Event()
+        carried_on = asyncio.Event()
+
+        async def publisher(acked: asyncio.Event, carried_on: asyncio.Event) -> None:
+            await client._wait_for(acked.wait(), timeout=5.0)
+            carried_on.set()
+
+        task = asyncio.create_task(publisher(acked, carried_on))
+        await asyncio.sleep(0)  # it now waits for the acknowledgement
+        acked.set()
+        for _ in range(turns):
+            await asyncio.sleep(0)
+        if task.cancel():
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert not carried_on.is_set(), f"cancellation swallowed after {turns} turns"
+        else:  # it had already finished: too late to cancel
+            await task
+            assert carried_on.is_set()
+
+
+async def test_a_wait_for_an_acknowledgement_still_times_out() -> None:
+    client = CancelSafeClient("127.0.0.1", free_port(), timeout=0.05)
+    with pytest.raises(aiomqtt.MqttError, match="timed out"):
+        await client._wait_for(asyncio.Event().wait(), timeout=None)
 
 
 def test_backoff_rejects_nonsense() -> None:

@@ -2,7 +2,9 @@
 
 MQTT 5 is used so that each filter carries a subscription identifier: a message is handed to
 exactly the subscriptions it arrived for, even when filters overlap (a broker may send one copy
-per matching filter). Vendor errors become ``BusError`` with the cause chained.
+per matching filter). Vendor errors become ``BusError`` with the cause chained. Every wait inside
+aiomqtt is bounded with ``asyncio.timeout`` instead of its ``asyncio.wait_for`` (see
+``CancelSafeClient``): on Python 3.11 the latter can swallow a cancellation.
 """
 
 from __future__ import annotations
@@ -11,11 +13,12 @@ import asyncio
 import dataclasses
 import itertools
 import logging
+import math
 import secrets
 import ssl
 import urllib.parse
 from collections.abc import Awaitable, Callable, Iterator
-from typing import Literal
+from typing import Literal, TypeVar
 
 import aiomqtt
 from paho.mqtt.packettypes import PacketTypes
@@ -30,6 +33,7 @@ log = logging.getLogger(__name__)
 
 Sleep = Callable[[float], Awaitable[None]]
 QoS = Literal[0, 1, 2]
+T = TypeVar("T")
 
 
 class BusUrlError(ConfigError, BusError):
@@ -119,6 +123,30 @@ _REFUSALS = {1, 2, 4, 5, 0x84, 0x85, 0x86, 0x87, 0x8C}
 def _is_refusal(exc: BaseException) -> bool:
     rc = getattr(exc, "rc", None)
     return isinstance(exc, aiomqtt.MqttCodeError) and getattr(rc, "value", rc) in _REFUSALS
+
+
+class CancelSafeClient(aiomqtt.Client):
+    """aiomqtt's client with its one waiting primitive made safe to cancel.
+
+    aiomqtt waits for every acknowledgement (CONNACK, SUBACK, UNSUBACK, PUBACK, the write of a
+    QoS 0 publish that could not go out at once, the end of a disconnect) in ``_wait_for``, with
+    ``asyncio.wait_for``. On Python 3.11 ``wait_for`` swallows a cancellation that arrives in the
+    loop iteration in which the awaited acknowledgement completes (CPython gh-86296, fixed in
+    3.12 by building ``wait_for`` on ``asyncio.timeout``): it returns the result, and the task
+    carries on as if it had never been cancelled. A task group cancels each child once, so such
+    a child (an agent loop that publishes at every tick) then runs for ever and the process
+    never stops. ``asyncio.timeout`` runs the wait inside the caller's task and lets the
+    cancellation through; a timeout is still aiomqtt's ``MqttError``.
+    """
+
+    # the signature is aiomqtt's (it passes ``timeout=``)
+    async def _wait_for(self, fut: Awaitable[T], timeout: float | None) -> T:  # noqa: ASYNC109
+        limit_s = self.timeout if timeout is None else timeout
+        try:
+            async with asyncio.timeout(None if limit_s == math.inf else limit_s):
+                return await fut
+        except TimeoutError:
+            raise aiomqtt.MqttError("Operation timed out") from None
 
 
 class MqttBus(Bus):
@@ -238,7 +266,7 @@ class MqttBus(Bus):
             await task_group.__aexit__(None, None, None)
         self._runner = None
 
-    def _make_client(self) -> aiomqtt.Client:
+    def _make_client(self) -> CancelSafeClient:
         will = None
         if self.will is not None:
             will = aiomqtt.Will(
@@ -250,7 +278,7 @@ class MqttBus(Bus):
         tls_context = None
         if self.url.tls:
             tls_context = self._tls_context or ssl.create_default_context()
-        return aiomqtt.Client(
+        return CancelSafeClient(
             self.url.host,
             self.url.port,
             username=self.url.username,
