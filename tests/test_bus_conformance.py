@@ -13,6 +13,7 @@ import pytest
 from pydantic import ValidationError
 
 from app.adapters.bus import (
+    Birth,
     Bus,
     BusClosed,
     Command,
@@ -388,6 +389,32 @@ async def test_a_clean_close_does_not_publish_the_will(harness: Harness) -> None
         marker = LinkState(sender="agent-3", t_s=1.0, online=True, vehicle=3)
         await watcher.publish(topics.link(3), marker)
         assert await take(links, 1) == [(topics.link(3), marker)]
+
+
+async def test_a_retained_message_reaches_later_subscribers(harness: Harness) -> None:
+    first = LinkState(sender="agent-1", t_s=0.0, online=True, vehicle=1)
+    latest = LinkState(sender="agent-1", t_s=1.0, online=False, vehicle=1)
+    event = LinkState(sender="agent-2", t_s=2.0, online=True, vehicle=2)
+    async with harness.open() as pub:  # QoS 1: each is with the broker once publish returns
+        await pub.publish(topics.link(1), first, qos=1, retain=True)
+        await pub.publish(topics.link(1), latest, qos=1, retain=True)
+        await pub.publish(topics.link(2), event, qos=1)  # not retained: gone for later ones
+        async with harness.open() as late, late.subscribe(topics.ALL_LINKS) as links:
+            assert await take(links, 1) == [(topics.link(1), latest)]
+            marker = LinkState(sender="agent-3", t_s=3.0, online=True, vehicle=3)
+            await pub.publish(topics.link(3), marker)
+            assert await take(links, 1) == [(topics.link(3), marker)]
+
+
+async def test_the_birth_is_published_as_the_client_opens(harness: Harness) -> None:
+    birth = Birth(topics.link(2), LinkState(sender="agent-2", t_s=0.0, online=True, vehicle=2))
+    async with (
+        harness.open() as watcher,
+        watcher.subscribe(topics.ALL_LINKS) as links,
+        harness.open(client_id="agent-2", birth=birth) as agent,
+    ):
+        assert await take(links, 1) == [(birth.topic, birth.message)]
+        assert agent.stats.published == 1
 
 
 def test_in_process_is_the_default() -> None:

@@ -15,6 +15,7 @@ import pytest
 
 from app.adapters.bus import (
     Backoff,
+    Birth,
     BrokerUrl,
     BusUrlError,
     LinkState,
@@ -46,10 +47,11 @@ async def test_broker_restart_is_survived_by_subscriber_and_publisher(
         mosquitto.restart()
         async with asyncio.timeout(WAIT_S):
             await sub_bus.wait_for_connection(2)  # reconnected and re-subscribed
-        # the publisher has not necessarily reconnected yet: publish waits for it
-        await pub.publish(topics.observation(0), observation(2.0))
+        # the publisher has not necessarily reconnected yet: a QoS 1 publish waits for it
+        await pub.publish(topics.observation(0), observation(2.0), qos=1)
         assert [m.t_s for _, m in await take(sub, 1)] == [2.0]
         assert pub.connections == 2
+        assert (pub.stats.reconnects, pub.losses) == (1, 1)
         assert sub_bus.connected
         assert sub_bus.stats.malformed == 0
 
@@ -63,12 +65,53 @@ async def test_publish_fails_with_bus_error_when_the_broker_stays_away(
         # the first publishes may still see the dying connection; a later one must fail
         for i in range(50):
             try:
-                await bus.publish(topics.observation(0), observation(float(i)))
+                await bus.publish(topics.observation(0), observation(float(i)), qos=1)
             except BusError as exc:
                 error = exc
                 break
         assert error is not None
         assert "not connected to the broker" in str(error) or "publish on" in str(error)
+
+
+async def test_a_qos_0_publish_with_the_broker_away_is_dropped_at_once(
+    mosquitto: Mosquitto,
+) -> None:
+    # a loop that publishes as it controls (an agent's status at every tick) must not stall
+    # for as long as the broker is away: at most once means it may be lost, and it is counted
+    async with MqttBus(mosquitto.url, op_timeout_s=30.0, backoff=Backoff(0.05, 2, 0.1)) as bus:
+        mosquitto.stop()
+        async with asyncio.timeout(WAIT_S):
+            while bus.connected:  # the loss seen by the bus
+                await bus.wait_for_change()
+        async with asyncio.timeout(1.0):  # far below op_timeout_s
+            for i in range(20):
+                await bus.publish(topics.observation(0), observation(float(i)))
+        assert bus.stats.unsent == 20
+        assert bus.stats.published == 0
+        assert bus.losses == 1
+
+
+async def test_a_retained_birth_is_heard_after_a_broker_restart(mosquitto: Mosquitto) -> None:
+    # A broker going down may publish its clients' wills ("offline"); the birth, published on
+    # every connection and retained, says "online" again to a subscriber that comes back
+    # before the client (live) or after it (the retained copy).
+    fast = Backoff(initial_s=0.05, max_s=0.5)
+    birth = Birth(
+        topics.link(3), LinkState(sender="agent-3", t_s=0.0, online=True, vehicle=3), retain=True
+    )
+    async with (
+        MqttBus(mosquitto.url, client_id="watcher", backoff=fast) as watcher,
+        watcher.subscribe(topics.ALL_LINKS) as links,
+        MqttBus(mosquitto.url, client_id="agent-3", birth=birth, backoff=fast) as bus,
+    ):
+        assert [(m.sender, m.online) for _, m in await take(links, 1)] == [("agent-3", True)]
+        mosquitto.restart()
+        async with asyncio.timeout(WAIT_S):
+            await watcher.wait_for_connection(2)
+            await bus.wait_for_connection(2)
+        assert [(m.sender, m.online) for _, m in await take(links, 1)] == [("agent-3", True)]
+        assert bus.stats.published == 2  # the birth, once per connection
+        assert bus.stats.reconnects == 1
 
 
 WILL_CLIENT = textwrap.dedent(

@@ -5,7 +5,15 @@ from __future__ import annotations
 from typing import Any
 
 from app.adapters.bus import topics
-from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, BusClosed, BusStats, Subscription, Will
+from app.adapters.bus.base import (
+    DEFAULT_QUEUE_SIZE,
+    Birth,
+    Bus,
+    BusClosed,
+    BusStats,
+    Subscription,
+    Will,
+)
 from app.adapters.bus.codec import MalformedMessage, UnsupportedVersion, decode, encode
 from app.adapters.bus.inproc import InProcessBroker, InProcessBus
 from app.adapters.bus.messages import (
@@ -24,6 +32,7 @@ from app.adapters.bus.topics import Topic, TopicError, TopicFilter
 __all__ = [
     "DEFAULT_QUEUE_SIZE",
     "Backoff",
+    "Birth",
     "BrokerUrl",
     "Bus",
     "BusClosed",
@@ -59,11 +68,14 @@ def open_bus(
     *,
     client_id: str | None = None,
     will: Will | None = None,
+    birth: Birth | None = None,
     queue_size: int = DEFAULT_QUEUE_SIZE,
     broker: InProcessBroker | None = None,
     **mqtt_options: Any,
 ) -> Bus:
     """A bus client to enter with ``async with``: in-process when ``url`` is None, else MQTT.
+
+    ``will`` is published for the client if it vanishes, ``birth`` each time it connects.
 
     ``broker`` shares one in-process broker between clients (in-process only); ``mqtt_options``
     are ``MqttBus`` keywords (qos, backoff, connect_timeout_s, op_timeout_s, tls_context, ...).
@@ -72,7 +84,11 @@ def open_bus(
     if url is None:
         if mqtt_options:
             raise TypeError(f"options for MQTT given to the in-process bus: {sorted(mqtt_options)}")
-        return InProcessBus(broker, client_id=client_id, will=will, queue_size=queue_size)
+        return InProcessBus(
+            broker, client_id=client_id, will=will, birth=birth, queue_size=queue_size
+        )
     if broker is not None:
         raise TypeError("an in-process broker was given with an MQTT URL")
-    return MqttBus(url, client_id=client_id, will=will, queue_size=queue_size, **mqtt_options)
+    return MqttBus(
+        url, client_id=client_id, will=will, birth=birth, queue_size=queue_size, **mqtt_options
+    )

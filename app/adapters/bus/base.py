@@ -43,6 +43,8 @@ class BusStats:
     dropped: int = 0  # messages pushed out of a full subscription queue
     malformed: int = 0  # payloads that did not decode (garbled, bad schema, non-finite)
     wrong_version: int = 0  # well-formed payloads of another schema version
+    unsent: int = 0  # QoS 0 messages not sent because the broker was out of reach (MQTT)
+    reconnects: int = 0  # connections after the first one (MQTT: the broker came back)
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -58,6 +60,13 @@ class Will:
         object.__setattr__(self, "topic", as_topic(self.topic))
         if self.qos not in (0, 1, 2):
             raise ValueError(f"qos must be 0, 1 or 2, got {self.qos!r}")
+
+
+Birth = Will
+"""A message the MQTT bus publishes itself each time it connects (``MqttBus(birth=...)``): the
+fields of a last will, for the opposite moment. With ``retain=True`` (and a retained will on
+the same topic) the broker always holds whether the client is there, for whoever subscribes
+later."""
 
 
 class BusClosed(BusError):
@@ -190,19 +199,28 @@ class Bus(abc.ABC):
         await self.__aexit__(None, None, None)
 
     async def publish(
-        self, topic: Topic | str, message: Message, *, qos: int | None = None
+        self,
+        topic: Topic | str,
+        message: Message,
+        *,
+        qos: int | None = None,
+        retain: bool = False,
     ) -> None:
         """Send ``message`` on ``topic`` (a name, no wildcards). Raises BusError on failure.
 
-        A publish is a suspension point on both buses (it yields to the event loop).
+        A publish is a suspension point on both buses (it yields to the event loop). At QoS 0
+        (at most once) a message the transport cannot send now is dropped and counted in
+        ``stats.unsent``, not waited for (see ``MqttBus``). ``retain``: the broker keeps the
+        topic's last retained message and hands it to every later subscriber (for a state,
+        such as a client's presence, rather than an event).
         """
         if not isinstance(message, Message):
             raise TypeError(f"publish takes a bus Message, got {type(message).__name__}")
         topic = as_topic(topic)
         if not self._open:
             raise BusClosed(f"bus {self.client_id!r} is not open; cannot publish on {topic}")
-        await self._send(topic, codec.encode(message), qos)
-        self._counts["published"] += 1
+        sent = await self._send(topic, codec.encode(message), qos, retain)
+        self._counts["published" if sent else "unsent"] += 1
 
     def subscribe(
         self, topic_filter: TopicFilter | Topic | str, *, queue_size: int | None = None
@@ -285,12 +303,13 @@ class Bus(abc.ABC):
         """Disconnect; ``crashed`` when the context exits on an error (the last will applies)."""
 
     @abc.abstractmethod
-    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
-        """Put a payload on the wire."""
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None, retain: bool) -> bool:
+        """Put a payload on the wire; False when a QoS 0 payload was dropped (no connection)."""
 
     @abc.abstractmethod
     async def _add_filter(self, topic_filter: TopicFilter) -> None:
-        """Start receiving ``topic_filter``; return once messages published after it arrive."""
+        """Start receiving ``topic_filter`` (and its retained messages); return once messages
+        published after it arrive."""
 
     @abc.abstractmethod
     async def _remove_filter(self, topic_filter: TopicFilter) -> None:

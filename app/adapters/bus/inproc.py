@@ -1,8 +1,9 @@
 """The in-process bus (the default): clients of one ``InProcessBroker`` in one event loop.
 
 It keeps MQTT's semantics so that code moves between the buses unchanged: topic wildcards,
-payloads encoded and validated by the codec on receipt, per-subscription bounded queues, and a
-last will published for a client whose context exits on an error.
+payloads encoded and validated by the codec on receipt, per-subscription bounded queues,
+retained messages, a birth published as a client opens and a last will published for a client
+whose context exits on an error.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import itertools
 import logging
 
 from app.adapters.bus import codec
-from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, Will
+from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, Will
 from app.adapters.bus.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
@@ -24,6 +25,7 @@ class InProcessBroker:
 
     def __init__(self) -> None:
         self._clients: list[InProcessBus] = []
+        self._retained: dict[str, bytes] = {}
 
     def _join(self, client: InProcessBus) -> None:
         self._clients.append(client)
@@ -32,10 +34,20 @@ class InProcessBroker:
         if client in self._clients:
             self._clients.remove(client)
 
-    def route(self, topic: str, payload: bytes) -> None:
-        """Hand a payload to every client; each decodes what it has subscribed to."""
+    def route(self, topic: str, payload: bytes, *, retain: bool = False) -> None:
+        """Hand a payload to every client; each decodes what it has subscribed to. A retained
+        payload is also kept for later subscribers (an empty one clears the topic's)."""
+        if retain:
+            if payload:
+                self._retained[topic] = payload
+            else:
+                self._retained.pop(topic, None)
         for client in list(self._clients):
             client._ingest(topic, payload)
+
+    def retained(self, topic_filter: TopicFilter) -> list[tuple[str, bytes]]:
+        """The retained payloads on the topics ``topic_filter`` matches."""
+        return [(t, p) for t, p in self._retained.items() if topic_filter.matches(t)]
 
 
 class InProcessBus(Bus):
@@ -47,27 +59,37 @@ class InProcessBus(Bus):
         *,
         client_id: str | None = None,
         will: Will | None = None,
+        birth: Birth | None = None,
         queue_size: int = DEFAULT_QUEUE_SIZE,
     ) -> None:
         super().__init__(client_id=client_id or f"inproc-{next(_ids)}", queue_size=queue_size)
         self.broker = broker if broker is not None else InProcessBroker()
         self.will = will
+        self.birth = birth
 
     async def _start(self) -> None:
         self.broker._join(self)
+        if self.birth is not None:
+            birth = self.birth
+            self.broker.route(birth.topic.value, codec.encode(birth.message), retain=birth.retain)
+            self._counts["published"] += 1
 
     async def _stop(self, *, crashed: bool) -> None:
         self.broker._leave(self)
         if crashed and self.will is not None:
             log.info("bus %s exited on an error: publishing its will", self.client_id)
-            self.broker.route(self.will.topic.value, codec.encode(self.will.message))
+            self.broker.route(
+                self.will.topic.value, codec.encode(self.will.message), retain=self.will.retain
+            )
 
-    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
-        self.broker.route(topic.value, payload)
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None, retain: bool) -> bool:
+        self.broker.route(topic.value, payload, retain=retain)
         await asyncio.sleep(0)  # yield like a network publish, so a publishing loop cannot starve
+        return True
 
     async def _add_filter(self, topic_filter: TopicFilter) -> None:
-        return None
+        for topic, payload in self.broker.retained(topic_filter):
+            self._ingest(topic, payload, [topic_filter])
 
     async def _remove_filter(self, topic_filter: TopicFilter) -> None:
         return None

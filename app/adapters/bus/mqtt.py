@@ -25,7 +25,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from app.adapters.bus import codec
-from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Bus, BusClosed, Will
+from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, BusClosed, Will
 from app.adapters.bus.topics import Topic, TopicFilter
 from app.errors import BusError, ConfigError
 
@@ -162,12 +162,18 @@ class MqttBus(Bus):
     will
         Published by the broker when this client vanishes without closing (and by the bus
         itself when its context exits on an error).
+    birth
+        Published by the bus itself each time it connects, once its subscriptions are back
+        (e.g. "online": a broker that went down may have published the will meanwhile).
     qos
         The QoS for publishes and subscriptions (0: at most once, 1: at least once).
     connect_timeout_s
         How long entering the bus waits for the first connection before raising BusError.
     op_timeout_s
-        How long a publish or subscribe waits, including for a lost connection to come back.
+        How long a subscribe or a QoS 1/2 publish waits, including for a lost connection to
+        come back. A QoS 0 publish never waits for one: without a connection it is dropped
+        and counted in ``stats.unsent`` (a loop that publishes as it controls must not stall
+        for an outage; QoS 0 promises at most once).
     tls_context
         For ``mqtts://``: the SSL context (default: the system's trusted CAs).
     sleep
@@ -180,6 +186,7 @@ class MqttBus(Bus):
         *,
         client_id: str | None = None,
         will: Will | None = None,
+        birth: Birth | None = None,
         qos: QoS = 0,
         queue_size: int = DEFAULT_QUEUE_SIZE,
         backoff: Backoff = Backoff(),
@@ -198,6 +205,7 @@ class MqttBus(Bus):
         if tls_context is not None and not self.url.tls:
             raise BusUrlError(f"a TLS context was given for {self.url}; use mqtts://")
         self.will = will
+        self.birth = birth
         self.qos: QoS = qos
         self.backoff = backoff
         self.connect_timeout_s = connect_timeout_s
@@ -214,6 +222,7 @@ class MqttBus(Bus):
         self._filter_ids: dict[TopicFilter, int] = {}
         self._next_id = itertools.count(1)
         self.connections = 0  # successful connections so far (reconnects = connections - 1)
+        self.losses = 0  # established connections lost so far
 
     def __repr__(self) -> str:
         return f"MqttBus({str(self.url)!r}, client_id={self.client_id!r})"
@@ -297,19 +306,26 @@ class MqttBus(Bus):
         """Connect, re-subscribe, read; on loss, wait the back-off and do it again."""
         delays = self.backoff.delays()
         while True:
+            up = False
             try:
                 async with self._make_client() as client:
                     for topic_filter in list(self._subscriptions):
                         await self._subscribe(client, topic_filter)
+                    if self.birth is not None:
+                        await self._announce(client, self.birth)
                     self.connections += 1
+                    up = True
                     self._set_client(client)
                     delays = self.backoff.delays()
                     if self.connections > 1:
+                        self._counts["reconnects"] += 1
                         log.info("bus %s: reconnected to %s", self.client_id, self.url)
                     async for message in client.messages:
                         self._receive(message)
             except (aiomqtt.MqttError, BusError) as exc:
                 self._last_error = exc
+                if up:
+                    self.losses += 1
                 if self.connections == 0 and _is_refusal(exc):
                     log.error(
                         "bus %s: %s refused the connection: %s", self.client_id, self.url, exc
@@ -323,6 +339,16 @@ class MqttBus(Bus):
                 self._set_client(None)
             await self._sleep(next(delays))
 
+    async def _announce(self, client: aiomqtt.Client, birth: Birth) -> None:
+        await client.publish(
+            birth.topic.value,
+            codec.encode(birth.message),
+            qos=birth.qos,
+            retain=birth.retain,
+            timeout=self.op_timeout_s,
+        )
+        self._counts["published"] += 1
+
     @property
     def connected(self) -> bool:
         """Whether the client is connected now, with its subscriptions in place."""
@@ -335,6 +361,11 @@ class MqttBus(Bus):
         """
         while self.connections < number or self._client is None:
             await self._changed.wait()
+
+    async def wait_for_change(self) -> None:
+        """Wait until the connection is next lost or made (read ``connected``, ``connections``
+        and ``losses`` then: counters, so that a watcher misses none)."""
+        await self._changed.wait()
 
     def _set_client(self, client: aiomqtt.Client | None) -> None:
         self._client = client
@@ -391,22 +422,45 @@ class MqttBus(Bus):
                 f" {[str(code) for code in granted]}"
             )
 
-    # transport operations, each retried across a reconnect until op_timeout_s
-    async def _send(self, topic: Topic, payload: bytes, qos: int | None) -> None:
+    # transport operations; QoS 0 publishes on the connection there is, the others are retried
+    # across a reconnect until op_timeout_s
+    async def _send(self, topic: Topic, payload: bytes, qos: int | None, retain: bool) -> bool:
         qos = self.qos if qos is None else qos
+        if qos == 0:
+            return await self._send_at_most_once(topic, payload, retain)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.op_timeout_s
         while True:
             client = await self._connected_client(deadline)
             try:
                 await client.publish(
-                    topic.value, payload, qos=qos, timeout=max(deadline - loop.time(), 0.01)
+                    topic.value,
+                    payload,
+                    qos=qos,
+                    retain=retain,
+                    timeout=max(deadline - loop.time(), 0.01),
                 )
-                return
+                return True
             except aiomqtt.MqttError as exc:
                 if not await self._await_change(client, deadline):
                     raise BusError(f"publish on {topic} to {self.url} failed: {exc}") from exc
                 log.info("bus %s: publish on %s failed (%s); retrying", self.client_id, topic, exc)
+
+    async def _send_at_most_once(self, topic: Topic, payload: bytes, retain: bool) -> bool:
+        if not self.is_open and self._runner is None:
+            raise BusClosed(f"bus {self.client_id!r} is not open")
+        client = self._client
+        if client is None:
+            await asyncio.sleep(0)  # a suspension point all the same
+            return False
+        try:
+            await client.publish(
+                topic.value, payload, qos=0, retain=retain, timeout=self.op_timeout_s
+            )
+        except aiomqtt.MqttError as exc:
+            log.debug("bus %s: dropped a QoS 0 message on %s: %s", self.client_id, topic, exc)
+            return False
+        return True
 
     async def _add_filter(self, topic_filter: TopicFilter) -> None:
         loop = asyncio.get_running_loop()
