@@ -34,7 +34,9 @@ class GuidanceConfig(StrictModel):
     ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
     moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
     ``latency_s``: the time from a telemetry frame to its command acting on the vehicle; each
-    agent steers on where its vehicle and the target will be by then (0 s: the paper's loop)."""
+    agent steers on where its vehicle and the target will be by then (0 s: the paper's loop;
+    the default 0.05 s is half the 10 Hz control period, for which a command is held, plus the
+    few milliseconds the built-in simulator's setpoints were measured to take; docs/guidance.md)."""
 
     law: Literal["proposed", "frew", "fixed"] = "proposed"
     c: Positive | None = None
@@ -43,7 +45,7 @@ class GuidanceConfig(StrictModel):
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
-    latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.0
+    latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.05
 
     @model_validator(mode="after")
     def _fixed_needs_c(self) -> "GuidanceConfig":

@@ -142,6 +142,10 @@ def report(result: MissionResult, radius_m: float, path_end_s: float, total_wall
             f"<= {SLOW_SPACING_RMS_DEG:g}" if slow else "",
         )
         line("  estimation RMSE (m)", fmt(f["estimation_rmse_m"], "6.2f"), None)
+        part = summary["parts"].get(f"track:{segment}", {}).get("team", {})
+        settled = part.get("settled", {}).get("distance_error_m", {}).get("rms")
+        line("  back within 3 m of the circle after (s)", fmt(part.get("time_to_circle_s")), None)
+        line("  distance error RMS from then on (m)", fmt(settled, "6.2f"), None)
     print("summary.json parts (the last segment includes the tail after the stop)")
     for key, part in summary["parts"].items():
         team = part["team"]
