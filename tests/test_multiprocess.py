@@ -17,15 +17,18 @@ from pathlib import Path
 import pytest
 
 from sitl.ports import find_free_udp_base_port
+from sitl.vehicle import AUTOPILOT_COMPONENT, HOLD
 from tests.mosquitto import (
     Mosquitto,
     free_port,
     mosquitto_fixture,  # noqa: F401
 )
+from tests.sitl_fixtures import RawClient
 
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parent.parent
+STOP_S = 30.0  # wall time a signalled agent gets to hold its vehicle and leave (1-4 s seen)
 
 # The team loiters 350 m from the target, gets the tracking command at 5 s, gathers and spaces
 # while the target waits (50 s), then tracks it for 60 s at 3 m/s: 120 s of mission time, 40 s
@@ -203,12 +206,61 @@ async def test_ground_and_three_agents_fly_the_mission_over_mosquitto(
     assert not any(e["kind"] == "agents_still_online" for e in events)
 
 
+async def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(
+    tmp_path: Path, mosquitto: Mosquitto
+) -> None:
+    mission = write_mission(tmp_path, vehicles=1, end_s=600.0)
+    base_port = find_free_udp_base_port(1)
+    out = tmp_path / "run"
+    common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
+    common += ["--out", str(out)]
+    async with contextlib.AsyncExitStack() as stack:
+        ground = await stack.enter_async_context(
+            standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
+        )
+        await ground.wait_for("ground station ready", 60.0)
+        agent = await stack.enter_async_context(
+            standoff("agent", "--vehicle", "0", *common, stderr_path=tmp_path / "a0.err")
+        )
+        await agent.wait_for("vehicle 1 under offboard control", 60.0)
+        agent.proc.send_signal(signal.SIGTERM)
+        assert await agent.finish(STOP_S) == 128 + signal.SIGTERM, agent.transcript()
+        # the vehicle itself, heard on the port its agent has left: in hold
+        async with RawClient(base_port) as vehicle:
+            beat = await vehicle.wait_for(
+                lambda m: (
+                    m.get_type() == "HEARTBEAT" and m.get_srcComponent() == AUTOPILOT_COMPONENT
+                ),
+                timeout_s=10.0,
+            )
+        assert beat.custom_mode == HOLD.custom_mode, beat
+        ground.proc.send_signal(signal.SIGINT)
+        assert await ground.finish(60.0) == 130, ground.transcript()
+
+    assert "agent 0: stopped by SIGTERM; vehicle 1 in hold" in agent.stdout()
+    # the agent's hold, not the vehicle's offboard failsafe (which would go to hold too)
+    assert "left OFFBOARD on its own" not in agent.stderr(), agent.transcript()
+    assert "hold on exit failed" not in agent.stderr(), agent.transcript()
+    report = json.loads((out / "agent-0.json").read_text())
+    assert (report["reason"], report["stopped_by"], report["held"]) == ("SIGTERM", 15, True)
+    agent_events = [json.loads(line) for line in (out / "events-agent-0.jsonl").open()]
+    assert {"kind": "hold", "vehicle": 0, "reason": "SIGTERM"}.items() <= next(
+        e for e in agent_events if e["kind"].startswith("hold")
+    ).items()
+    assert {"kind": "agent_stop", "reason": "SIGTERM", "held": True}.items() <= (
+        agent_events[-1].items()
+    )
+    # it said it was going offline (the ground heard that, not the broker's last will)
+    events = [json.loads(line) for line in (out / "events.jsonl").open()]
+    offline = [(e["vehicle"], e["reason"]) for e in events if e["kind"] == "agent_offline"]
+    assert offline == [(0, "SIGTERM")]
+
+
 async def test_ctrl_c_on_the_ground_station_interrupts_and_tells_the_agents(
     tmp_path: Path, mosquitto: Mosquitto
 ) -> None:
     # Ctrl-C on the ground station: the run folder says interrupted and the agents are told to
-    # shut down. (An agent's own SIGTERM is not tested here: it has been seen to hang the agent
-    # now and then, an open bug recorded in docs/multiprocess.md.)
+    # shut down.
     mission = write_mission(tmp_path, vehicles=1, end_s=600.0)
     base_port = find_free_udp_base_port(1)
     out = tmp_path / "run"

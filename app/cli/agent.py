@@ -88,17 +88,15 @@ def run(args: argparse.Namespace) -> int:
     result = asyncio.run(
         run_agent(plan, vehicle, url, connect, out, builtin_simulator=builtin, notify=notify)
     )
+    where = f"vehicle {vehicle + 1} {'in hold' if result.held else 'hold not confirmed'}"
     if result.stopped_by is not None:
-        notify(
-            f"agent {vehicle}: stopped by {result.stopped_by.name}; vehicle {vehicle + 1} in hold"
-        )
+        notify(f"agent {vehicle}: stopped by {result.stopped_by.name}; {where}")
         return 128 + int(result.stopped_by)
     if result.reason != "shutdown":
         print(
-            f"standoff agent: error: agent {vehicle}: {result.reason}; vehicle {vehicle + 1}"
-            " left in hold",
+            f"standoff agent: error: agent {vehicle}: {result.reason}; {where}",
             file=sys.stderr,
         )
         return 1
-    notify(f"agent {vehicle}: shutdown by the ground station; vehicle {vehicle + 1} in hold")
+    notify(f"agent {vehicle}: shutdown by the ground station; {where}")
     return 0

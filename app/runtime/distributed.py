@@ -7,9 +7,10 @@ ground's events). ``run_agent`` is one vehicle's process (``standoff agent --veh
 bus client ``agent-I`` (last will: ``LinkState(online=False)``), a MAVSDK link to that vehicle
 alone, the same ``prepare_vehicle`` and ``VehicleAgent`` that ``standoff fly`` runs, its own
 ``vehicle-{I+1}.tlog``, ``events-agent-I.jsonl`` and ``agent-I.json``. An agent stops on the
-ground's ``shutdown`` or on SIGINT/SIGTERM; either way its vehicle is put in hold (the link does
-that when it closes) and it says ``LinkState(online=False)`` before leaving the bus. A second
-signal to either process stops it at once (still closing its logs).
+ground's ``shutdown`` or on SIGINT/SIGTERM; either way it stops commanding its vehicle and puts it
+in hold at once (the link tries again as it closes if that was refused), then unwinds and says
+``LinkState(online=False)`` before leaving the bus. A second signal to either process stops it at
+once (still closing its logs).
 """
 
 import asyncio
@@ -41,7 +42,7 @@ from app.adapters.live_view import MissionSnapshot
 from app.adapters.tlog import TlogWriter
 from app.adapters.vehicle.link import GeodeticOrigin, VehicleLink
 from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
-from app.errors import BusError, ConfigError, StandoffError
+from app.errors import BusError, ConfigError, LinkError, StandoffError
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import EventSink, LoggingSink
 from app.runtime.ground import GroundRuntimeParams, GroundStation, Measurement
@@ -59,6 +60,7 @@ log = logging.getLogger(__name__)
 
 GROUND_CLIENT = "ground"
 SHUTDOWN_GRACE_S = 15.0  # wall time the ground waits for the agents to hold and go offline
+HOLD_TIMEOUT_S = 5.0  # wall time a stopping agent waits for its vehicle to accept the hold
 
 Notify = Callable[[str], None]
 
@@ -372,6 +374,7 @@ class AgentResult:
     vehicle: int
     reason: str  # "shutdown", "SIGINT", "SIGTERM", or why the vehicle link ended
     stopped_by: signal.Signals | None = None
+    held: bool = False  # the vehicle accepted the hold the agent sent as it stopped
     counters: dict[str, Any] = field(default_factory=dict)
 
 
@@ -451,9 +454,20 @@ async def run_agent(
                 flying.add_done_callback(lambda _t: stop.set("vehicle link closed"))
                 result.reason = await stop.wait()
                 result.stopped_by = stop.signum
-                events.emit("agent_stop", flight.last_t_s, vehicle=vehicle, reason=result.reason)
-                flying.cancel()  # the link puts the vehicle in hold as it closes
                 listener.cancel()
+                if not flying.done():
+                    # hold first, while the agent's loops still run: unwinding them (bus
+                    # unsubscribes, logs) takes long enough on a loaded machine for the
+                    # vehicle's offboard failsafe to act first
+                    result.held = await flight.hold(result.reason)
+                events.emit(
+                    "agent_stop",
+                    flight.last_t_s,
+                    vehicle=vehicle,
+                    reason=result.reason,
+                    held=result.held,
+                )
+                flying.cancel()  # were the hold refused, the link tries again as it closes
         finally:
             result.counters = flight.counters(bus)
             (out_dir / f"{name}.json").write_text(
@@ -502,6 +516,29 @@ class _Flight:
     def last_t_s(self) -> float:
         latest = self._link.latest if self._link is not None else None
         return latest.t_s if latest is not None else 0.0
+
+    async def hold(self, reason: str) -> bool:
+        """Stop commanding the vehicle and put it in hold now; whether it accepted.
+
+        Only once the agent flies (under offboard control): before that the link, as it
+        closes, holds a vehicle whose offboard start was under way. Bounded by
+        ``HOLD_TIMEOUT_S``; a refusal or a timeout is an event and an error in the log.
+        """
+        link, agent = self._link, self._agent
+        if link is None or agent is None:
+            return False
+        agent.stand_down()
+        i = self._vehicle
+        try:
+            async with asyncio.timeout(HOLD_TIMEOUT_S):
+                await link.hold()
+        except (LinkError, TimeoutError) as exc:
+            detail = str(exc) or f"no answer within {HOLD_TIMEOUT_S:.0f} s"
+            log.error("agent %d: vehicle %d did not take the hold: %s", i, i + 1, detail)
+            self._events.emit("hold_refused", self.last_t_s, vehicle=i, reason=detail)
+            return False
+        self._events.emit("hold", self.last_t_s, vehicle=i, reason=reason)
+        return True
 
     def counters(self, bus: Bus) -> dict[str, Any]:
         out: dict[str, Any] = {"bus": dataclasses.asdict(bus.stats)}

@@ -769,8 +769,13 @@ class MavsdkVehicleLink:
     async def hold(self) -> None:
         adapter = self._require_adapter()
         async with self._send_lock:
-            await adapter.stop()
-            self._offboard = "idle"
+            # the vehicle leaving offboard from now on is this hold, not a change on its own
+            before, self._offboard = self._offboard, "idle"
+            try:
+                await adapter.stop()
+            except BaseException:
+                self._offboard = before
+                raise
 
 
 class MavsdkHub:
