@@ -55,8 +55,12 @@ class GuidanceConfig(StrictModel):
 
 
 class PhaseConfig(StrictModel):
+    """Phase keeping (eq. 24-28): ``gain_per_s`` is k of eq. (24) in gather and adjust;
+    ``track_gain_per_s`` replaces it in the track stage (None: the same)."""
+
     law: Literal["paper", "frew", "none"] = "paper"
     gain_per_s: NonNegative = 0.1
+    track_gain_per_s: NonNegative | None = None
     predictive: bool = True
 
 

@@ -70,3 +70,22 @@ BASE = load_config("hil", MissionConfig).model_dump()
 def test_bad_missions_are_refused_with_the_field(patch, needle):
     with pytest.raises(ConfigError, match=needle):
         validate_config({**BASE, **patch}, MissionConfig, source="m.toml")
+
+
+def test_track_stage_settings_reach_only_the_track_parameters():
+    base = load_config("hil", MissionConfig)
+    config = base.model_copy(
+        update={
+            "phase": base.phase.model_copy(update={"track_gain_per_s": 0.3}),
+            "guidance": base.guidance.model_copy(
+                update={"track_speed_cap": True, "latency_s": 0.08}
+            ),
+        }
+    )
+    for agent in build_plan(config).agents:
+        assert agent.track is not None
+        assert agent.track.phase.gain_per_s == 0.3
+        assert agent.agent.phase.gain_per_s == config.phase.gain_per_s
+        assert agent.track.guidance.speed_cap
+        assert not agent.agent.guidance.speed_cap
+        assert agent.latency_s == 0.08

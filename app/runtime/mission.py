@@ -89,6 +89,8 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             curvature_margin=g.curvature_margin,
         )
         phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
+        track_gain = config.phase.track_gain_per_s
+        track_phase = phase if track_gain is None else replace(phase, gain_per_s=track_gain)
         track_guidance = replace(
             guidance,
             law=g.law if g.track_law == "paper" else g.track_law,
@@ -108,7 +110,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 standby_north_m=config.standby.north_m,
                 local=local,
                 main=main if main.feedback != "none" else None,
-                track=AgentParams(i, envelope, track_guidance, phase),
+                track=AgentParams(i, envelope, track_guidance, track_phase),
                 use_target_accel=config.estimator.use_target_accel,
                 latency_s=g.latency_s,
             )
