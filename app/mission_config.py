@@ -33,10 +33,11 @@ class GuidanceConfig(StrictModel):
     ``track_law = "paper"`` flies the track stage exactly like the approach.
     ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
     moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
-    ``latency_s``: the time from a telemetry frame to its command acting on the vehicle; each
-    agent steers on where its vehicle and the target will be by then (0 s: the paper's loop;
-    the default 0.05 s is half the 10 Hz control period, for which a command is held, plus the
-    few milliseconds the built-in simulator's setpoints were measured to take; docs/guidance.md)."""
+    ``latency_s``: the time from a telemetry frame until its command starts to act on the
+    vehicle; ``hold_s``: how long a command acts (the control period, 0.1 s at 10 Hz telemetry).
+    Each agent steers on where its vehicle and the target will be in the middle of the hold
+    (both 0: the paper's loop). The default latency, 0.01 s, is what setpoints to the built-in
+    simulator were measured to take (docs/guidance.md); set it for a slower link."""
 
     law: Literal["proposed", "frew", "fixed"] = "proposed"
     c: Positive | None = None
@@ -45,7 +46,8 @@ class GuidanceConfig(StrictModel):
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
-    latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.05
+    latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
+    hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
 
     @model_validator(mode="after")
     def _fixed_needs_c(self) -> "GuidanceConfig":

@@ -78,7 +78,7 @@ def test_track_stage_settings_reach_only_the_track_parameters():
         update={
             "phase": base.phase.model_copy(update={"track_gain_per_s": 0.3}),
             "guidance": base.guidance.model_copy(
-                update={"track_speed_cap": True, "latency_s": 0.08}
+                update={"track_speed_cap": True, "latency_s": 0.08, "hold_s": 0.2}
             ),
         }
     )
@@ -88,4 +88,4 @@ def test_track_stage_settings_reach_only_the_track_parameters():
         assert agent.agent.phase.gain_per_s == config.phase.gain_per_s
         assert agent.track.guidance.speed_cap
         assert not agent.agent.guidance.speed_cap
-        assert agent.latency_s == 0.08
+        assert (agent.latency_s, agent.hold_s) == (0.08, 0.2)

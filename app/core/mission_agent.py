@@ -73,11 +73,15 @@ class MissionAgentParams:
     feedback mode; ``None`` turns feedback
     off. Fixes and fused estimates older than ``max_age_s`` are not used; a fused estimate is
     predicted forward with ``prediction_model``; ``use_target_accel`` passes the estimated
-    acceleration to the moving-target correction. ``latency_s`` (improvement): the time from a
-    telemetry frame to its command acting on the vehicle; the agent steers on where the vehicle
-    and the target will be then (``agent.predict_own`` under the command it last sent), not on
-    where they were (0: the paper's loop, which a delay of one 0.1 s tick already costs ~50 %
-    more distance error around a moving target; ``benchmarks.bench_track --latency-ticks``).
+    acceleration to the moving-target correction.
+
+    Latency compensation (improvement): ``latency_s`` is the time from a telemetry frame until
+    its command starts to act on the vehicle, ``hold_s`` how long a command then acts (the
+    control period). The agent steers on where the vehicle and the target will be in the middle
+    of that, ``latency_s + hold_s / 2`` after the frame (``agent.predict_own`` under the command
+    it last sent), not on where they were (both 0: the paper's loop; a delay of one 0.1 s tick
+    costs ~50 % more distance error around a moving target, ``benchmarks.bench_track
+    --latency-ticks``).
     """
 
     vehicle: int
@@ -92,10 +96,13 @@ class MissionAgentParams:
     prediction_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
     use_target_accel: bool = False
     latency_s: float = 0.0
+    hold_s: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.latency_s) and 0.0 <= self.latency_s <= 1.0):
-            raise ValueError(f"latency_s must be in [0, 1] s, got {self.latency_s!r}")
+        for name in ("latency_s", "hold_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise ValueError(f"{name} must be in [0, 1] s, got {value!r}")
         if not (math.isfinite(self.standby_east_m) and math.isfinite(self.standby_north_m)):
             raise ValueError("standby point must be finite")
         if not (math.isfinite(self.max_age_s) and self.max_age_s > 0.0):
@@ -195,14 +202,18 @@ def target_at(
 def control(
     state: MissionAgentState, t_s: float, own: OwnTelemetry, params: MissionAgentParams
 ) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
-    """One tick: the command for the vehicle's telemetry ``own`` of time ``t_s``, computed for
-    the moment it will act, ``t_s + params.latency_s``: its implied course rate is within the
-    limit for the course the vehicle will have then (against the reported one it may exceed it
-    by what the vehicle turns in ``latency_s``)."""
-    if params.latency_s > 0.0:
+    """One tick: the command for the vehicle's telemetry ``own`` of time ``t_s``, steered for
+    ``latency_s + hold_s / 2`` later (see ``MissionAgentParams``). Its implied course rate
+    k * (command - course) is within the limit for the course the vehicle is predicted to have
+    then, the middle of the hold; against the course at the start of the hold it may ask up to
+    W (1 + k hold_s / 2), which keeps the vehicle turning at W through a hold in which a
+    command at exactly W / k of lead would let the rate decay (the turn rate itself is the
+    autopilot's to limit, and it does)."""
+    if params.latency_s > 0.0 or params.hold_s > 0.0:
+        lead_s = params.latency_s + 0.5 * params.hold_s
         course, speed = state.last_command or (own.course_rad, own.speed_m_s)
-        ahead = predict_own(own, course, speed, params.agent.envelope, params.latency_s)
-        state, command, events = _control(state, t_s + params.latency_s, ahead, params)
+        ahead = predict_own(own, course, speed, params.agent.envelope, lead_s)
+        state, command, events = _control(state, t_s + lead_s, ahead, params)
     else:
         state, command, events = _control(state, t_s, own, params)
     return replace(state, last_command=(command.course_rad, command.speed_m_s)), command, events

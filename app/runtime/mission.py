@@ -113,6 +113,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 track=AgentParams(i, envelope, track_guidance, track_phase),
                 use_target_accel=config.estimator.use_target_accel,
                 latency_s=g.latency_s,
+                hold_s=g.hold_s,
             )
             for i in range(n)
         )
