@@ -15,6 +15,8 @@ from app.core.estimation.federated import (
     apply_feedback,
     fuse,
     information_shares,
+    main_allocate,
+    main_fuse,
     main_receive,
 )
 from app.core.estimation.imm import IMMParams, default_imm_params
@@ -227,3 +229,30 @@ def test_a_late_allocation_replays_the_newer_observations():
     np.testing.assert_allclose(fed.imm.p, state.imm.p, rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(fed.imm.mu, state.imm.mu, atol=1e-9)
     assert fed.counters == replace(state.counters, feedback=1)
+
+
+def test_an_estimate_delivered_after_a_fusion_it_missed_is_still_used():
+    """The main filter fused at t = 10 and holds its allocation copies at t = 10; an estimate
+    its sender made at 9.9 (after the one it sent at 9.8) arrives late: it is new information,
+    taken in place of the copy and carried to the next fusion, not dropped as out of order."""
+    params = MainParams(feedback="mixture")
+    state = main_receive(MainState(), _estimate("a", np.zeros(6), np.eye(6), t=9.8))
+    state = main_receive(state, _estimate("b", np.zeros(6), np.eye(6), t=9.8))
+    fused = main_fuse(state, 10.0, params)
+    assert fused is not None
+    state = main_allocate(state, fused, params)
+    held = state.estimate_of("a")
+    assert held is not None
+    assert held.t_s == 10.0  # the copy
+    moved = np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    state = main_receive(state, _estimate("a", moved, np.eye(6), t=9.9))
+    assert state.out_of_order_dropped == 0
+    held = state.estimate_of("a")
+    assert held is not None
+    assert held.t_s == 9.9
+    again = main_fuse(state, 10.1, params)
+    assert again is not None
+    assert again.x[0] > 1.0  # the late estimate pulled the fused one east
+    # but one older than its sender's newest is still dropped
+    state = main_receive(state, _estimate("a", np.zeros(6), np.eye(6), t=9.85))
+    assert state.out_of_order_dropped == 1

@@ -88,6 +88,9 @@ class MainState:
     out_of_order_dropped: int = 0
     shared: GlobalEstimate | None = None
     """The last allocation sent back (its mu is the common prior of the modewise fusion)."""
+    received_t: tuple[tuple[str, float], ...] = ()
+    """The time of the newest estimate each sensor itself sent (``latest`` may hold the main
+    filter's allocation copy instead, at the fusion's time)."""
 
     def estimate_of(self, sensor: str) -> LocalEstimate | None:
         for est in self.latest:
@@ -97,13 +100,29 @@ class MainState:
 
 
 def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
-    """Keep ``estimate`` as its sender's newest; an older one than already held is counted and
-    dropped."""
-    held = state.estimate_of(estimate.sensor)
-    if held is not None and estimate.t_s < held.t_s:
+    """Keep ``estimate`` as its sender's newest; one older than the newest its sender already
+    sent is counted and dropped.
+
+    The order is the sender's own: after a fusion the main filter holds its allocation copy of
+    every local filter at the fusion's time (``main_allocate``), but an estimate its sender
+    made a little earlier and the bus delivered after that fusion is still new information (its
+    measurements are not in the fused estimate); it replaces the copy and is carried to the next
+    fusion's time there. Refusing it, as a comparison with the copy's time would, leaves the
+    main filter fusing its own copies, coasting on the old velocity while the target turns,
+    whenever the estimates arrive later than the fusion runs (the multi-process mission, where
+    each agent stamps its estimates with its own vehicle's time)."""
+    sent = dict(state.received_t)
+    last = sent.get(estimate.sensor)
+    if last is not None and estimate.t_s < last:
         return replace(state, out_of_order_dropped=state.out_of_order_dropped + 1)
+    sent[estimate.sensor] = estimate.t_s
     others = tuple(e for e in state.latest if e.sensor != estimate.sensor)
-    return replace(state, latest=(*others, estimate), received=state.received + 1)
+    return replace(
+        state,
+        latest=(*others, estimate),
+        received=state.received + 1,
+        received_t=tuple(sorted(sent.items())),
+    )
 
 
 def information_shares(covariances: FloatArray) -> FloatArray:
