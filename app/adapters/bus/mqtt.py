@@ -126,7 +126,8 @@ def _is_refusal(exc: BaseException) -> bool:
 
 
 class CancelSafeClient(aiomqtt.Client):
-    """aiomqtt's client with its one waiting primitive made safe to cancel.
+    """aiomqtt's client with its one waiting primitive made safe to cancel, and given up when
+    the connection is lost.
 
     aiomqtt waits for every acknowledgement (CONNACK, SUBACK, UNSUBACK, PUBACK, the write of a
     QoS 0 publish that could not go out at once, the end of a disconnect) in ``_wait_for``, with
@@ -137,15 +138,37 @@ class CancelSafeClient(aiomqtt.Client):
     a child (an agent loop that publishes at every tick) then runs for ever and the process
     never stops. ``asyncio.timeout`` runs the wait inside the caller's task and lets the
     cancellation through; a timeout is still aiomqtt's ``MqttError``.
+
+    aiomqtt also leaves a wait for an acknowledgement pending when the connection drops (it
+    never comes, on a clean session): the caller, a control loop's publish, would sit out the
+    whole timeout. Here the wait ends, with ``MqttError``, as soon as the client has seen the
+    connection go.
     """
 
     # the signature is aiomqtt's (it passes ``timeout=``)
     async def _wait_for(self, fut: Awaitable[T], timeout: float | None) -> T:  # noqa: ASYNC109
         limit_s = self.timeout if timeout is None else timeout
+        lost = self._disconnected
+        ack = fut is not lost and fut is not self._connected  # not a connect or a disconnect
         try:
-            async with asyncio.timeout(None if limit_s == math.inf else limit_s):
-                return await fut
+            async with asyncio.timeout(None if limit_s == math.inf else limit_s) as scope:
+                if not ack:
+                    return await fut
+                waiting = True
+
+                def give_up(_lost: asyncio.Future[None]) -> None:
+                    if waiting and not scope.expired():
+                        scope.reschedule(asyncio.get_running_loop().time())
+
+                lost.add_done_callback(give_up)
+                try:
+                    return await fut
+                finally:
+                    waiting = False
+                    lost.remove_done_callback(give_up)
         except TimeoutError:
+            if ack and lost.done():
+                raise aiomqtt.MqttError("Connection lost while waiting") from None
             raise aiomqtt.MqttError("Operation timed out") from None
 
 
