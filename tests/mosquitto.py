@@ -66,8 +66,12 @@ class Mosquitto:
             f"{self.extra_config}"
         )
 
-    def start(self) -> None:
-        """Start on ``self.port`` and return once it accepts TCP connections."""
+    def start(self, *, keep_port: bool = False) -> None:
+        """Start and return once it accepts TCP connections.
+
+        A port lost to another process meanwhile is replaced by a new free one, unless
+        ``keep_port`` (a restart: the clients know this port), which tries the same port again.
+        """
         for attempt in range(3):
             conf = self.workdir / "mosquitto.conf"
             conf.write_text(self.config(), encoding="utf-8")
@@ -81,7 +85,8 @@ class Mosquitto:
                 return
             self.stop()
             if attempt < 2 and self.process is not None and self.process.returncode != 0:
-                self.port = free_port()  # lost a race for the port with another process
+                if not keep_port:
+                    self.port = free_port()  # lost a race for the port with another process
         text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
         raise RuntimeError(f"mosquitto did not start on port {self.port}:\n{text[-2000:]}")
 
@@ -112,7 +117,7 @@ class Mosquitto:
     def restart(self) -> None:
         """Stop and start again on the same port (clients see a broker restart)."""
         self.stop()
-        self.start()
+        self.start(keep_port=True)
 
 
 @pytest.fixture(name="mosquitto")

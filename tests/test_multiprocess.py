@@ -7,12 +7,16 @@ Readiness is read from the processes' own output lines, never waited for with sl
 
 import asyncio
 import contextlib
+import csv
+import itertools
 import json
+import math
 import signal
 import sys
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -28,11 +32,13 @@ from tests.sitl_fixtures import RawClient
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parent.parent
-STOP_S = 30.0  # wall time a signalled agent gets to hold its vehicle and leave (1-4 s seen)
+OUTAGE_S = 3.0  # how long the broker stays down in the restart test (wall time)
+RESTART_END_S = 90.0  # the restart test's mission time
+STOP_S = 30.0  # wall time a signalled agent gets to hold its vehicle and leave (1-5 s seen)
 
-# The team loiters 350 m from the target, gets the tracking command at 5 s, gathers and spaces
-# while the target waits (50 s), then tracks it for 60 s at 3 m/s: 120 s of mission time, 40 s
-# of wall time at speed-up 3.
+# By default the team loiters 350 m from the target, gets the tracking command at 5 s, gathers
+# and spaces while the target waits (50 s), then tracks it for 60 s at 3 m/s: 120 s of mission
+# time, 40 s of wall time at speed-up 3.
 SHORT_MISSION = """
 name = "short-mqtt"
 vehicles = {vehicles}
@@ -48,13 +54,13 @@ max_accel_m_s2 = 2.0
 max_course_rate_rad_s = 0.2
 
 [standby]
-east_m = -350.0
+east_m = {standby_east_m}
 north_m = 0.0
 radius_m = 150.0
 
 [target]
 kind = "waypoints"
-wait_s = 50.0
+wait_s = {wait_s}
 legs = [{{ to_east_m = 0.0, to_north_m = 180.0, speed_m_s = 3.0, label = "A-B" }}]
 
 [link]
@@ -65,9 +71,18 @@ speedup = 3.0
 """
 
 
-def write_mission(tmp_path: Path, vehicles: int = 3, end_s: float = 120.0) -> Path:
+def write_mission(
+    tmp_path: Path,
+    vehicles: int = 3,
+    end_s: float = 120.0,
+    standby_east_m: float = -350.0,
+    wait_s: float = 50.0,
+) -> Path:
     path = tmp_path / "short-mqtt.toml"
-    path.write_text(SHORT_MISSION.format(vehicles=vehicles, end_s=end_s), encoding="utf-8")
+    text = SHORT_MISSION.format(
+        vehicles=vehicles, end_s=end_s, standby_east_m=standby_east_m, wait_s=wait_s
+    )
+    path.write_text(text, encoding="utf-8")
     return path
 
 
@@ -149,6 +164,87 @@ async def standoff(*args: str, stderr_path: Path) -> AsyncIterator[Standoff]:
                     await proc.wait()
 
 
+async def start_team(
+    stack: contextlib.AsyncExitStack, common: list[str], tmp_path: Path, vehicles: int = 3
+) -> tuple[Standoff, list[Standoff]]:
+    """Agents first (each listens on its vehicle's port), then the ground with the simulator;
+    returns once every vehicle is under offboard control."""
+    agents = [
+        await stack.enter_async_context(
+            standoff("agent", "--vehicle", str(i), *common, stderr_path=tmp_path / f"a{i}.err")
+        )
+        for i in range(vehicles)
+    ]
+    for i, agent in enumerate(agents):
+        await agent.wait_for(f"waiting for vehicle {i + 1}", 60.0)
+    ground = await stack.enter_async_context(
+        standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
+    )
+    await ground.wait_for("ground station ready", 60.0)
+    for i, agent in enumerate(agents):
+        await agent.wait_for(f"vehicle {i + 1} under offboard control", 60.0)
+    return ground, agents
+
+
+@dataclass(frozen=True)
+class TrackRow:
+    """One vehicle at one ground tick of ``track.csv``, with the errors the test needs."""
+
+    t_s: float
+    vehicle: int
+    active: bool
+    target_north_m: float
+    distance_m: float  # from the true target
+    bearing_rad: float  # of the vehicle seen from the true target, from east
+    estimate_error_m: float  # the fused estimate from the true target
+
+    @classmethod
+    def parse(cls, row: dict[str, str]) -> "TrackRow":
+        target = float(row["target_east_m"]), float(row["target_north_m"])
+        here = float(row["east_m"]), float(row["north_m"])
+        estimate = float(row["estimate_east_m"]), float(row["estimate_north_m"])
+        return cls(
+            t_s=float(row["t_s"]),
+            vehicle=int(row["vehicle"]),
+            active=float(row["active"]) > 0.5,
+            target_north_m=target[1],
+            distance_m=math.dist(here, target),
+            bearing_rad=math.atan2(here[1] - target[1], here[0] - target[0]),
+            estimate_error_m=math.dist(estimate, target),
+        )
+
+
+def track_rows(path: Path) -> list[TrackRow]:
+    with path.open(newline="", encoding="utf-8") as f:
+        return [TrackRow.parse(row) for row in csv.DictReader(f)]
+
+
+def turned_rad(rows: list[TrackRow]) -> float:
+    """How far a vehicle went round the target over ``rows`` (its own, in time order)."""
+    return sum(
+        math.remainder(b.bearing_rad - a.bearing_rad, math.tau) for a, b in itertools.pairwise(rows)
+    )
+
+
+def read_events(path: Path) -> list[dict[str, Any]]:
+    """The events of a process's log so far (it flushes whole lines; a torn last one is left)."""
+    events = []
+    for line in path.read_text(encoding="utf-8").splitlines() if path.exists() else []:
+        with contextlib.suppress(json.JSONDecodeError):
+            events.append(json.loads(line))
+    return events
+
+
+async def wait_for_event(path: Path, timeout_s: float, **fields: object) -> dict[str, Any]:
+    """The first event with these fields in a running process's event log (polled)."""
+    async with asyncio.timeout(timeout_s):
+        while True:
+            for event in read_events(path):
+                if fields.items() <= event.items():
+                    return event
+            await asyncio.sleep(0.1)  # a file another process appends to: no event to await
+
+
 async def test_ground_and_three_agents_fly_the_mission_over_mosquitto(
     tmp_path: Path, mosquitto: Mosquitto
 ) -> None:
@@ -158,20 +254,7 @@ async def test_ground_and_three_agents_fly_the_mission_over_mosquitto(
     common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
     common += ["--out", str(out)]
     async with contextlib.AsyncExitStack() as stack:
-        agents = [
-            await stack.enter_async_context(
-                standoff("agent", "--vehicle", str(i), *common, stderr_path=tmp_path / f"a{i}.err")
-            )
-            for i in range(3)
-        ]
-        for i, agent in enumerate(agents):  # each agent listens on its vehicle's port
-            await agent.wait_for(f"waiting for vehicle {i + 1}", 60.0)
-        ground = await stack.enter_async_context(
-            standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
-        )
-        await ground.wait_for("ground station ready", 60.0)
-        for i, agent in enumerate(agents):
-            await agent.wait_for(f"vehicle {i + 1} under offboard control", 60.0)
+        ground, agents = await start_team(stack, common, tmp_path)
         assert await ground.finish(120.0) == 0, ground.transcript()
         codes = [await agent.finish(30.0) for agent in agents]
 
@@ -204,6 +287,89 @@ async def test_ground_and_three_agents_fly_the_mission_over_mosquitto(
     offline = {e["vehicle"]: e["reason"] for e in events if e["kind"] == "agent_offline"}
     assert offline == {0: "shutdown", 1: "shutdown", 2: "shutdown"}
     assert not any(e["kind"] == "agents_still_online" for e in events)
+
+
+async def test_a_broker_restart_mid_mission_is_survived(
+    tmp_path: Path, mosquitto: Mosquitto
+) -> None:
+    # a shorter mission: the team loiters nearer and the target waits less (track from ~40 s)
+    mission = write_mission(tmp_path, end_s=RESTART_END_S, standby_east_m=-200.0, wait_s=35.0)
+    base_port = find_free_udp_base_port(3)
+    out = tmp_path / "run"
+    common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
+    common += ["--out", str(out)]
+    async with contextlib.AsyncExitStack() as stack:
+        ground, agents = await start_team(stack, common, tmp_path)
+        # mid-mission: every agent has heard that the team tracks the target (an agent cut off
+        # before it heard a stage change flies the old stage meanwhile)
+        for i in range(3):
+            await wait_for_event(
+                out / f"events-agent-{i}.jsonl", 90.0, kind="agent_stage", stage="track"
+            )
+        await asyncio.to_thread(mosquitto.stop)
+        await asyncio.sleep(OUTAGE_S)  # the outage itself: its length is the test's input
+        await asyncio.to_thread(mosquitto.start, keep_port=True)
+        assert await ground.finish(120.0) == 0, ground.transcript()
+        codes = [await agent.finish(30.0) for agent in agents]
+
+    # every process lost the broker once and came back
+    back_t = 0.0  # mission time by which every agent was back on the bus
+    for i, (agent, code) in enumerate(zip(agents, codes, strict=True)):
+        assert code == 0, agent.transcript()
+        assert f"agent {i}: shutdown by the ground station; vehicle {i + 1} in hold" in (
+            agent.stdout()
+        )
+        report = json.loads((out / f"agent-{i}.json").read_text())
+        assert (report["reason"], report["held"]) == ("shutdown", True)
+        assert report["counters"]["bus"]["reconnects"] == 1
+        # it kept flying through the outage: its statuses were dropped, not waited for, and
+        # the vehicle never fell back on its offboard failsafe
+        assert report["counters"]["bus"]["unsent"] > 0
+        assert report["counters"]["agent"]["offboard_restarts"] == 0
+        assert report["counters"]["link"]["left_offboard"] == 0
+        agent_events = read_events(out / f"events-agent-{i}.jsonl")
+        kinds = [e["kind"] for e in agent_events]
+        assert kinds.count("bus_lost") == kinds.count("bus_reconnected") == 1
+        back_t = max(back_t, next(e for e in agent_events if e["kind"] == "bus_reconnected")["t_s"])
+    events = read_events(out / "events.jsonl")
+    kinds = [e["kind"] for e in events]
+    assert kinds.count("bus_lost") == kinds.count("bus_reconnected") == 1
+    # a broker going down may publish the agents' wills ("vanished"); their births, on the
+    # reconnection, said "online" again: the ground still knew every agent at the end
+    for i in range(3):
+        said = [
+            (e["kind"], e["reason"])
+            for e in events
+            if e["kind"] in ("agent_online", "agent_offline") and e["vehicle"] == i
+        ]
+        assert said[0][0] == "agent_online", said
+        assert said[-1] == ("agent_offline", "shutdown"), said
+        for (kind, reason), (then, _) in itertools.pairwise(said):
+            assert kind == "agent_online" or (reason == "vanished" and then == "agent_online")
+    shutdown = next(e for e in events if e["kind"] == "shutdown_sent")
+    assert shutdown["agents"] == [0, 1, 2]
+    assert not any(e["kind"] == "agents_still_online" for e in events)
+
+    # after the restart the estimate follows the moving target and the team orbits it
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is False
+    assert summary["mission_t_s"] >= RESTART_END_S
+    assert "track:A-B" in summary["parts"]
+    # From 2 s of mission time after the reconnection (the ground's first tick still has its
+    # pre-outage estimate, some 20 m behind the target that moved meanwhile): the estimate stays
+    # on the target as it drives on (a frozen one falls behind by 3 m/s; 2-9 m seen), and each
+    # vehicle goes on circling the true target. The distance bound is loose on purpose: the
+    # track stage's guidance alone has shown excursions of up to ~115 m from the circle in this
+    # test's mission without any outage; agents cut off from the ground ran 250-335 m away.
+    rows = track_rows(out / "track.csv")
+    after = [r for r in rows if back_t + 2.0 < r.t_s < RESTART_END_S and r.active]
+    assert after[-1].target_north_m - after[0].target_north_m > 30.0
+    assert max(r.estimate_error_m for r in after) < 15.0
+    for i in range(3):
+        mine = [r for r in after if r.vehicle == i]
+        assert len(mine) > 100, f"vehicle {i}: {len(mine)} ticks heard after the restart"
+        assert abs(turned_rad(mine)) > math.pi / 2, f"vehicle {i} did not circle the target"
+        assert max(abs(r.distance_m - 90.0) for r in mine) < 150.0, f"vehicle {i}"
 
 
 async def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(

@@ -28,10 +28,13 @@ from pathlib import Path
 from typing import Any
 
 from app.adapters.bus import (
+    Backoff,
+    Birth,
     BrokerUrl,
     Bus,
     Command,
     LinkState,
+    MqttBus,
     Subscription,
     Will,
     open_bus,
@@ -61,6 +64,8 @@ log = logging.getLogger(__name__)
 GROUND_CLIENT = "ground"
 SHUTDOWN_GRACE_S = 15.0  # wall time the ground waits for the agents to hold and go offline
 HOLD_TIMEOUT_S = 5.0  # wall time a stopping agent waits for its vehicle to accept the hold
+# reconnect tries at most every second: a mission's broker is back within ~1 s of its return
+BUS_BACKOFF = Backoff(initial_s=0.1, factor=2.0, max_s=1.0)
 
 Notify = Callable[[str], None]
 
@@ -157,14 +162,66 @@ def _broker_name(url: str) -> str:
     return str(BrokerUrl.parse(url))
 
 
+# --- on the bus: presence and reconnections ---------------------------------------------------
+
+
+def _mission_bus(broker_url: str, client: str, vehicle: int | None = None) -> Bus:
+    """A process's bus client, its presence kept on ``topics.link(...)`` as a retained state.
+
+    Its birth (``online``, on every connection) and last will (``vanished``) are retained, as is
+    the ``online: false`` it publishes as it leaves (``_leave_bus``): whoever subscribes later
+    (a ground station started after its agents, or one that reconnects after them when the
+    broker restarts) learns who is there. A broker going down publishes its clients' wills;
+    their births after the restart say ``online`` again.
+    """
+    topic = topics.link(client if vehicle is None else vehicle)
+
+    def state(online: bool, reason: str = "") -> LinkState:
+        return LinkState(sender=client, t_s=0.0, online=online, vehicle=vehicle, reason=reason)
+
+    return open_bus(
+        broker_url,
+        client_id=client,
+        will=Will(topic, state(False, "vanished"), qos=1, retain=True),
+        birth=Birth(topic, state(True), qos=1, retain=True),
+        backoff=BUS_BACKOFF,
+    )
+
+
+async def _leave_bus(bus: Bus, state: LinkState) -> None:
+    """Publish ``state`` (``online: false``, why) as the retained presence; a broker out of
+    reach is logged, not raised: the process is leaving anyway."""
+    topic = topics.link(state.sender if state.vehicle is None else state.vehicle)
+    try:
+        await bus.publish(topic, state, qos=1, retain=True)
+    except BusError as exc:
+        log.warning("%s could not say it is going offline: %s", state.sender, exc)
+
+
+async def _watch_bus(bus: Bus, events: EventSink, mission_t: Callable[[], float]) -> None:
+    """Each loss of the broker and each reconnection, as an event in the process's log."""
+    if not isinstance(bus, MqttBus):
+        return
+    losses, connections = bus.losses, bus.connections
+    while True:
+        await bus.wait_for_change()
+        if bus.losses > losses:
+            losses = bus.losses
+            events.emit("bus_lost", mission_t(), broker=str(bus.url), losses=losses)
+        if bus.connections > connections:
+            connections = bus.connections
+            events.emit("bus_reconnected", mission_t(), connections=connections)
+
+
 # --- the ground station -----------------------------------------------------------------------
 
 
 class TeamPresence:
-    """Which agents are on the bus, from their ``LinkState`` messages (and last wills).
+    """Which agents are on the bus, from their ``LinkState`` messages (births and last wills).
 
-    An agent that started before the ground station subscribed announced itself unheard;
-    ``expect`` adds the vehicles the station has heard from (their statuses) to the online set.
+    The states are retained (``_mission_bus``), so agents that started before the ground station
+    subscribed are heard too; ``expect`` also adds the vehicles the station has heard from
+    (their statuses) to the online set, unless they last said they were going offline.
     """
 
     def __init__(self, events: EventSink) -> None:
@@ -240,13 +297,7 @@ async def run_ground(
             stack.enter_context(eventlog)
             stack.enter_context(stop_on_signals(stop))
             events: EventSink = LoggingSink(eventlog)
-            will = Will(
-                topics.link(GROUND_CLIENT),
-                LinkState(sender=GROUND_CLIENT, t_s=0.0, online=False, reason="vanished"),
-            )
-            bus = await stack.enter_async_context(
-                open_bus(broker_url, client_id=GROUND_CLIENT, will=will)
-            )
+            bus = await stack.enter_async_context(_mission_bus(broker_url, GROUND_CLIENT))
             presence = TeamPresence(events)
             link_states = await stack.enter_async_context(bus.subscribe(topics.ALL_LINKS))
             if sitl_base_port is not None:
@@ -255,9 +306,6 @@ async def run_ground(
                 )
                 ports = f"{sitl_base_port}..{sitl_base_port + plan.count - 1}"
                 notify(f"built-in simulator running: {plan.count} vehicles on UDP ports {ports}")
-            await bus.publish(
-                topics.link(GROUND_CLIENT), LinkState(sender=GROUND_CLIENT, t_s=0.0, online=True)
-            )
             events.emit(
                 "mission_start",
                 0.0,
@@ -284,6 +332,9 @@ async def run_ground(
             try:
                 async with _plain_errors(), asyncio.TaskGroup() as tg:
                     watcher = tg.create_task(presence.watch(link_states), name="ground-presence")
+                    bus_watch = tg.create_task(
+                        _watch_bus(bus, events, lambda: _mission_t(ground)), name="ground-bus"
+                    )
                     station = tg.create_task(ground.run(), name="ground-station")
                     station.add_done_callback(lambda _t: stop.set("mission complete"))
                     reason = await stop.wait()
@@ -294,6 +345,7 @@ async def run_ground(
                     await shutdown.send()
                     await shutdown.wait_offline(shutdown_grace_s)
                     watcher.cancel()
+                    bus_watch.cancel()
             finally:
                 if not shutdown.sent:  # the station failed or a second signal: still stop them
                     with contextlib.suppress(BusError, TimeoutError):
@@ -357,11 +409,10 @@ class _Shutdown:
             self._notify(f"agents still online after {grace_s:.0f} s: {online}")
         else:
             self._notify(f"every agent stopped ({len(self._presence.seen)} seen)")
-        with contextlib.suppress(BusError):
-            await self._bus.publish(
-                topics.link(GROUND_CLIENT),
-                LinkState(sender=GROUND_CLIENT, t_s=t, online=False, reason="mission over"),
-            )
+        await _leave_bus(
+            self._bus,
+            LinkState(sender=GROUND_CLIENT, t_s=t, online=False, reason="mission over"),
+        )
 
 
 # --- one vehicle's agent ----------------------------------------------------------------------
@@ -430,15 +481,8 @@ async def run_agent(
         eventlog = stack.enter_context(EventLog(out_dir / f"events-{name}.jsonl"))
         events: EventSink = LoggingSink(eventlog)
         stack.enter_context(stop_on_signals(stop))
-        will = Will(
-            topics.link(vehicle),
-            LinkState(sender=name, t_s=0.0, online=False, vehicle=vehicle, reason="vanished"),
-        )
-        bus = await stack.enter_async_context(open_bus(broker_url, client_id=name, will=will))
+        bus = await stack.enter_async_context(_mission_bus(broker_url, name, vehicle))
         commands = await stack.enter_async_context(bus.subscribe(topics.ALL_COMMANDS))
-        await bus.publish(
-            topics.link(vehicle), LinkState(sender=name, t_s=0.0, online=True, vehicle=vehicle)
-        )
         events.emit(
             "agent_start", 0.0, vehicle=vehicle, url=connect_url, bus=_broker_name(broker_url)
         )
@@ -448,6 +492,9 @@ async def run_agent(
                 listener = tg.create_task(
                     _watch_shutdown(commands, vehicle, stop), name=f"{name}-shutdown"
                 )
+                bus_watch = tg.create_task(
+                    _watch_bus(bus, events, lambda: flight.last_t_s), name=f"{name}-bus"
+                )
                 flying = tg.create_task(
                     flight.fly(connect_url, out_dir, builtin_simulator), name=f"{name}-flight"
                 )
@@ -455,6 +502,7 @@ async def run_agent(
                 result.reason = await stop.wait()
                 result.stopped_by = stop.signum
                 listener.cancel()
+                bus_watch.cancel()
                 if not flying.done():
                     # hold first, while the agent's loops still run: unwinding them (bus
                     # unsubscribes, logs) takes long enough on a loaded machine for the
@@ -473,17 +521,16 @@ async def run_agent(
             (out_dir / f"{name}.json").write_text(
                 json.dumps(dataclasses.asdict(result), indent=2, default=str) + "\n"
             )
-            with contextlib.suppress(BusError):
-                await bus.publish(
-                    topics.link(vehicle),
-                    LinkState(
-                        sender=name,
-                        t_s=flight.last_t_s,
-                        online=False,
-                        vehicle=vehicle,
-                        reason=result.reason or "error",
-                    ),
-                )
+            await _leave_bus(
+                bus,
+                LinkState(
+                    sender=name,
+                    t_s=flight.last_t_s,
+                    online=False,
+                    vehicle=vehicle,
+                    reason=result.reason or "error",
+                ),
+            )
     return result
 
 
