@@ -84,9 +84,9 @@ class Mosquitto:
             if self._wait_accepting():
                 return
             self.stop()
-            if attempt < 2 and self.process is not None and self.process.returncode != 0:
-                if not keep_port:
-                    self.port = free_port()  # lost a race for the port with another process
+            lost_the_port = self.process is not None and self.process.returncode != 0
+            if attempt < 2 and lost_the_port and not keep_port:
+                self.port = free_port()  # lost a race for the port with another process
         text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
         raise RuntimeError(f"mosquitto did not start on port {self.port}:\n{text[-2000:]}")
 
