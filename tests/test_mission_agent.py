@@ -1,6 +1,7 @@
 """The agent's mission logic, closed-loop on the eq. 2 fixed-wing, with no I/O."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -174,3 +175,48 @@ def test_a_vehicle_left_out_orbits_without_phase_keeping():
     joined: MissionAgentState = hear_mission(states[1], "adjust", (0, 1, 2))
     _, member, _ = control(joined, 0.0, own(starts[1]), plist[1])
     assert abs(member.speed_m_s - ENVELOPE.cruise_speed_m_s) > 0.1
+
+
+def _adjust_around_moving_target(moving_speed_m_s: float) -> float:
+    """One vehicle that heard "adjust" but never "track", around a target driving north at
+    7 m/s: its RMS distance error (m) over the last 60 s of 150."""
+    base = params(0)
+    track_guidance = GuidanceParams(
+        radius_m=90.0, law="frew", inverse_field=False, orbit_plan="ellipse"
+    )
+    p = replace(
+        base,
+        track=replace(base.agent, guidance=track_guidance),
+        moving_speed_m_s=moving_speed_m_s,
+    )
+    state = hear_mission(initial_agent_state(p), "adjust", (0,))
+    vehicle = FixedWingState(0.0, -90.0, math.pi / 2, 14.0)
+    errors = []
+    for k in range(1500):
+        t = k * 0.1
+        fused = GlobalEstimate(
+            t, np.array([0.0, 0.0, 7.0 * t, 7.0, 0.0, 0.0]), np.eye(6), (("0", 1.0),)
+        )
+        state = hear_fused(state, fused, p)
+        state, cmd, _ = control(state, t, own(vehicle), p)
+        assert math.isfinite(cmd.course_rad)
+        vehicle = step(vehicle, cmd.course_rad, cmd.speed_m_s, LIMITS, 0.1)
+        if t >= 90.0:
+            errors.append(math.hypot(vehicle.east_m, vehicle.north_m - 7.0 * (t + 0.1)) - 90.0)
+    return float(np.sqrt(np.mean(np.square(errors))))
+
+
+def test_an_agent_that_missed_track_flies_the_track_guidance_around_a_moving_target():
+    # the ground starts tracking once the target moves faster than moving_speed_m_s; an agent
+    # that never heard it (cut off from the bus) applies the same rule itself
+    with_rule = _adjust_around_moving_target(1.5)
+    without = _adjust_around_moving_target(math.inf)
+    assert with_rule < 25.0
+    assert without > 2.0 * with_rule
+
+
+def test_moving_speed_must_be_a_non_negative_number():
+    with pytest.raises(ValueError, match="moving_speed_m_s"):
+        replace(params(0), moving_speed_m_s=math.nan)
+    with pytest.raises(ValueError, match="moving_speed_m_s"):
+        replace(params(0), moving_speed_m_s=-1.0)

@@ -221,13 +221,15 @@ class AgentState:
     """What the agent remembers between ticks.
 
     ``mode``: flying the ordinary field or the inverse one. ``c`` and ``c_speed_m_s``: the
-    guidance parameter and the speed it was computed for (``c_speed_m_s = 0``: not yet).
+    guidance parameter and the speed it was computed for (``c_speed_m_s = 0``: not yet), by
+    the law ``c_law`` (the mission may switch laws between ticks).
     ``next_switch_check_t_s``: when the ILVF rule is next evaluated.
     """
 
     mode: FieldMode = "field"
     c: float = FREW_C
     c_speed_m_s: float = 0.0
+    c_law: str = ""
     next_switch_check_t_s: float = -math.inf
 
 
@@ -352,17 +354,17 @@ def _guidance_c(state: AgentState, params: AgentParams, speed_m_s: float) -> Age
         # design for the speed rounded up to the update step, so that the field stays flyable
         # at every speed up to the one it was computed for
         step = g.c_update_speed_step_m_s
-        design_speed = math.ceil(speed_m_s / step - 1e-9) * step
-        if design_speed == state.c_speed_m_s:
+        design_speed = max(math.ceil(speed_m_s / step - 1e-9), 1) * step
+        if design_speed == state.c_speed_m_s and state.c_law == g.law:
             return state
         env = params.envelope
         c = guidance.optimal_c(
             g.radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin
         )
-        return replace(state, c=c, c_speed_m_s=design_speed)
-    if c == state.c and state.c_speed_m_s > 0.0:
+        return replace(state, c=c, c_speed_m_s=design_speed, c_law=g.law)
+    if c == state.c and state.c_speed_m_s > 0.0 and state.c_law == g.law:
         return state
-    return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9))
+    return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9), c_law=g.law)
 
 
 def _speed_command(inputs: AgentInputs, params: AgentParams, state: AgentState) -> float:

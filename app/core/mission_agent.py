@@ -68,7 +68,11 @@ class MissionAgentParams:
     ``agent`` flies the mission (its ``index`` is replaced each tick by the vehicle's place in
     the active team); ``track``, when given, replaces it in the track stage (the mission turns
     the inverse-field switch off there: it serves the approach, and on the circle around a
-    moving, estimated target its crossing prediction is dominated by noise); ``standby`` flies
+    moving, estimated target its crossing prediction is dominated by noise), and in adjust as
+    soon as the target the agent sees moves faster than ``moving_speed_m_s`` (the ground
+    station's own rule for starting to track: an agent that has not heard "track", e.g. cut off
+    from the bus, must not keep flying the stationary-target approach around a moving target);
+    ``standby`` flies
     the loiter around (``standby_east_m``, ``standby_north_m``). ``main`` carries the federated
     feedback mode; ``None`` turns feedback
     off. Fixes and fused estimates older than ``max_age_s`` are not used; a fused estimate is
@@ -97,8 +101,11 @@ class MissionAgentParams:
     use_target_accel: bool = False
     latency_s: float = 0.0
     hold_s: float = 0.0
+    moving_speed_m_s: float = 1.5
 
     def __post_init__(self) -> None:
+        if not self.moving_speed_m_s >= 0.0:  # inf: only the track stage flies ``track``
+            raise ValueError(f"moving_speed_m_s must be >= 0, got {self.moving_speed_m_s!r}")
         for name in ("latency_s", "hold_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 <= value <= 1.0):
@@ -241,8 +248,19 @@ def _control(
             fix = fixes.get(vehicle)
             if fix is not None and abs(t_s - fix.t_s) <= params.max_age_s:
                 team.append(fix.at(t_s, params.max_age_s))
-    base = params.track if state.stage == "track" and params.track is not None else params.agent
+    base = _flown(state, target, params)
     agent = base if base.index == index else replace(base, index=index)
     inputs = AgentInputs(t_s=t_s, own=own, target=target, team_positions=tuple(team))
     g, command, events = agent_step(state.guidance, inputs, agent)
     return replace(state, guidance=g), command, events
+
+
+def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentParams) -> AgentParams:
+    """The guidance and phase keeping flown now: ``track`` in the track stage, and in adjust
+    once the target is seen moving faster than ``moving_speed_m_s`` (where the ground station
+    itself moves on to track); else ``agent``."""
+    if params.track is None:
+        return params.agent
+    moving = math.hypot(target.v_east_m_s, target.v_north_m_s) > params.moving_speed_m_s
+    tracking = state.stage == "track" or (state.stage == "adjust" and moving)
+    return params.track if tracking else params.agent

@@ -114,6 +114,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 use_target_accel=config.estimator.use_target_accel,
                 latency_s=g.latency_s,
                 hold_s=g.hold_s,
+                moving_speed_m_s=config.stages.moving_speed_m_s,
             )
             for i in range(n)
         )
