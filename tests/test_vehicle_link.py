@@ -21,6 +21,7 @@ from app.adapters.vehicle.mavsdk_link import (
     LinkConfig,
     MavsdkHub,
     MavsdkVehicleLink,
+    RepeatLimiter,
     _Broadcast,
     validate_url,
 )
@@ -348,3 +349,22 @@ async def test_an_offboard_start_the_vehicle_acks_but_never_shows_is_a_link_erro
     assert offboard.calls == ["velocity", "start"]
     with pytest.raises(LinkError, match="start_offboard before send"):
         await vehicle.send(CourseSpeedCommand(math.pi / 2, 15.0))
+
+
+def test_repeat_limiter_lets_a_repeated_line_through_once_per_window_with_a_count():
+    now = [0.0]
+    limiter = RepeatLimiter(5.0, clock=lambda: now[0])
+    assert limiter.admit("Sending message failed") == 0
+    for _ in range(99):  # a cut link at 20 Hz for 5 s
+        now[0] += 0.05
+        assert limiter.admit("Sending message failed") is None
+    assert limiter.admit("another line") == 0  # other lines are not held back by it
+    now[0] = 5.0
+    assert limiter.admit("Sending message failed") == 99
+    now[0] += 60.0
+    assert limiter.admit("Sending message failed") == 0
+
+
+def test_repeat_limiter_refuses_a_bad_window():
+    with pytest.raises(ValueError, match="window_s"):
+        RepeatLimiter(math.nan)
