@@ -7,10 +7,12 @@ import ssl
 import subprocess
 import sys
 import textwrap
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import aiomqtt
+import paho.mqtt.publish
 import pytest
 
 from app.adapters.bus import (
@@ -21,10 +23,11 @@ from app.adapters.bus import (
     LinkState,
     MqttBus,
     Will,
+    codec,
     open_bus,
     topics,
 )
-from app.adapters.bus.mqtt import CancelSafeClient
+from app.adapters.bus.mqtt import READ_BURST, CancelSafeClient
 from app.errors import BusError, ConfigError
 from tests.mosquitto import Mosquitto, free_port, mosquitto_fixture  # noqa: F401
 from tests.test_bus_conformance import WAIT_S, observation, take
@@ -54,6 +57,36 @@ async def test_broker_restart_is_survived_by_subscriber_and_publisher(
         assert (pub.stats.reconnects, pub.losses) == (1, 1)
         assert sub_bus.connected
         assert sub_bus.stats.malformed == 0
+
+
+async def test_a_subscriber_that_fell_behind_reads_its_backlog_at_once(
+    mosquitto: Mosquitto,
+) -> None:
+    """Messages that arrived while the subscriber's loop was busy are all read at its next turn
+    and meet the subscription's bounded queue there (the newest kept, the rest counted as
+    dropped), instead of one message per event-loop iteration, every one in turn, ever later.
+    """
+    backlog = READ_BURST + 16  # more than one burst
+    async with (
+        MqttBus(mosquitto.url, client_id="slow") as slow,
+        slow.subscribe(topics.ALL_OBSERVATIONS, queue_size=4) as sub,
+    ):
+        # published from outside the loop while it is blocked, as a loaded process is
+        paho.mqtt.publish.multiple(
+            [
+                (str(topics.observation(0)), codec.encode(observation(float(k))))
+                for k in range(backlog)
+            ],
+            hostname="127.0.0.1",
+            port=mosquitto.port,
+        )
+        time.sleep(0.3)  # noqa: ASYNC251  # the broker passes them on meanwhile
+        for _ in range(4):  # four turns of the event loop
+            await asyncio.sleep(0)
+        assert slow.stats.received == backlog
+        assert (slow.stats.dropped, sub.dropped) == (backlog - 4, backlog - 4)
+        newest = [float(k) for k in range(backlog - 4, backlog)]
+        assert [m.t_s for _, m in await take(sub, 4)] == newest
 
 
 async def test_publish_fails_with_bus_error_when_the_broker_stays_away(

@@ -5,6 +5,10 @@ exactly the subscriptions it arrived for, even when filters overlap (a broker ma
 per matching filter). Vendor errors become ``BusError`` with the cause chained. Every wait inside
 aiomqtt is bounded with ``asyncio.timeout`` instead of its ``asyncio.wait_for`` (see
 ``CancelSafeClient``): on Python 3.11 the latter can swallow a cancellation.
+
+Received messages go from the socket straight into the subscriptions' bounded queues, every
+packet already in the socket at once (``CancelSafeClient``): a process that falls behind then
+drops its oldest messages there instead of reading every one, ever later.
 """
 
 from __future__ import annotations
@@ -15,12 +19,14 @@ import itertools
 import logging
 import math
 import secrets
+import select
 import ssl
 import urllib.parse
 from collections.abc import Awaitable, Callable, Iterator
-from typing import Literal, TypeVar
+from typing import Any, Literal, TypeVar
 
 import aiomqtt
+import paho.mqtt.client as paho
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
@@ -34,6 +40,12 @@ log = logging.getLogger(__name__)
 Sleep = Callable[[float], Awaitable[None]]
 QoS = Literal[0, 1, 2]
 T = TypeVar("T")
+Deliver = Callable[[str, bytes, Properties | None], None]
+"""Where a received message goes: its topic, payload and MQTT 5 properties."""
+
+READ_BURST = 64
+"""At most this many MQTT packets are read each time the socket is readable (the event loop
+then runs its other callbacks before the next burst)."""
 
 
 class BusUrlError(ConfigError, BusError):
@@ -143,7 +155,53 @@ class CancelSafeClient(aiomqtt.Client):
     never comes, on a clean session): the caller, a control loop's publish, would sit out the
     whole timeout. Here the wait ends, with ``MqttError``, as soon as the client has seen the
     connection go.
+
+    And aiomqtt reads one MQTT packet each time the socket is readable (paho's ``loop_read``
+    reads one unless QoS 1/2 messages are in flight), i.e. one per event-loop iteration, then
+    queues it in an unbounded queue that its message iterator empties one message per few
+    iterations. A process that cannot keep up (an agent on a loaded machine: measured 18-41 s
+    behind the broker) leaves its backlog in the socket and the broker, out of reach of the
+    subscriptions' bounded queues, and reads every old message in order. With ``deliver``, each
+    readable event reads every packet already there (at most ``READ_BURST``) and hands each
+    message to ``deliver`` at once, without aiomqtt's queue; ``messages`` then only ends, with
+    ``MqttError``, when the connection is lost.
     """
+
+    def __init__(self, *args: Any, deliver: Deliver | None = None, **kwargs: Any) -> None:
+        self._deliver = deliver
+        super().__init__(*args, **kwargs)
+
+    def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
+        if self._deliver is None:
+            super()._on_message(client, userdata, message)
+            return
+        try:
+            topic = message.topic
+        except UnicodeDecodeError:
+            log.warning("dropped a message whose topic is not UTF-8")
+            return
+        self._deliver(topic, bytes(message.payload), getattr(message, "properties", None))
+
+    def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
+        if self._deliver is None:
+            super()._on_socket_open(client, userdata, sock)
+            return
+
+        def read() -> None:
+            try:
+                for _ in range(READ_BURST):
+                    if client.loop_read() != paho.MQTT_ERR_SUCCESS or not _readable(client):
+                        break
+            except Exception as exc:  # as aiomqtt's reader: a broken socket ends the connection
+                if not self._disconnected.done():
+                    self._disconnected.set_exception(exc)
+
+        def create_misc_task() -> None:
+            self._misc_task = self._loop.create_task(self._misc_loop())
+
+        # paho calls this from the thread that connects (aiomqtt's executor)
+        self._loop.call_soon_threadsafe(self._loop.add_reader, sock.fileno(), read)
+        self._loop.call_soon_threadsafe(create_misc_task)
 
     # the signature is aiomqtt's (it passes ``timeout=``)
     async def _wait_for(self, fut: Awaitable[T], timeout: float | None) -> T:  # noqa: ASYNC109
@@ -170,6 +228,18 @@ class CancelSafeClient(aiomqtt.Client):
             if ack and lost.done():
                 raise aiomqtt.MqttError("Connection lost while waiting") from None
             raise aiomqtt.MqttError("Operation timed out") from None
+
+
+def _readable(client: paho.Client) -> bool:
+    """Whether the client's socket has more bytes to read now (decrypted ones too, for TLS)."""
+    sock = client.socket()
+    if sock is None:
+        return False
+    pending = getattr(sock, "pending", None)
+    if pending is not None and pending() > 0:
+        return True
+    readable, _, _ = select.select([sock], [], [], 0.0)
+    return bool(readable)
 
 
 class MqttBus(Bus):
@@ -313,6 +383,7 @@ class MqttBus(Bus):
         return CancelSafeClient(
             self.url.host,
             self.url.port,
+            deliver=self._receive,
             username=self.url.username,
             password=self.url.password,
             identifier=self.client_id,
@@ -343,8 +414,8 @@ class MqttBus(Bus):
                     if self.connections > 1:
                         self._counts["reconnects"] += 1
                         log.info("bus %s: reconnected to %s", self.client_id, self.url)
-                    async for message in client.messages:
-                        self._receive(message)
+                    async for _never in client.messages:  # messages go to _receive
+                        pass
             except (aiomqtt.MqttError, BusError) as exc:
                 self._last_error = exc
                 if up:
@@ -409,13 +480,13 @@ class MqttBus(Bus):
             return False
         return True
 
-    def _receive(self, message: aiomqtt.Message) -> None:
+    def _receive(self, topic: str, payload: bytes, properties: Properties | None) -> None:
         filters = None
-        ids = getattr(message.properties, "SubscriptionIdentifier", None)
+        ids = getattr(properties, "SubscriptionIdentifier", None)
         if ids:
             by_id = {i: f for f, i in self._filter_ids.items()}
             filters = [by_id[i] for i in ids if i in by_id]
-        self._ingest(message.topic.value, bytes(message.payload), filters)
+        self._ingest(topic, payload, filters)
 
     async def _connected_client(self, deadline: float) -> aiomqtt.Client:
         if not self.is_open and self._runner is None:
