@@ -74,7 +74,7 @@ async def test_a_subscriber_that_fell_behind_reads_its_backlog_at_once(
         # published from outside the loop while it is blocked, as a loaded process is
         paho.mqtt.publish.multiple(
             [
-                (str(topics.observation(0)), codec.encode(observation(float(k))))
+                (str(topics.observation(0)), codec.encode(observation(float(k))), 0, False)
                 for k in range(backlog)
             ],
             hostname="127.0.0.1",
