@@ -1,0 +1,124 @@
+"""The agent loop (``VehicleAgent``) around the mission logic: what it does with the bus's messages.
+
+A tiny fake vehicle link (its camera fed by the test, no telemetry) and the in-process bus.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Callable
+
+import numpy as np
+import pytest
+
+from app.adapters.bus import InProcessBroker, InProcessBus, codec, topics
+from app.adapters.vehicle.link import (
+    CourseSpeedCommand,
+    LinkEvent,
+    TargetObservation,
+    VehicleTelemetry,
+)
+from app.config import load_config
+from app.core.estimation.messages import GlobalEstimate
+from app.mission_config import MissionConfig
+from app.runtime.agent import VehicleAgent
+from app.runtime.mission import build_plan
+from app.runtime.wire import global_to_bus
+
+WAIT_S = 5.0
+
+
+class CameraOnlyLink:
+    """A vehicle link whose camera sees what the test puts in ``seen``; no telemetry."""
+
+    vehicle_id = 1
+    autopilot_name = "fake"
+    latest: VehicleTelemetry | None = None
+    link_ok = True
+
+    def __init__(self) -> None:
+        self.seen: asyncio.Queue[TargetObservation] = asyncio.Queue()
+
+    async def wait_ready(self, timeout_s: float) -> VehicleTelemetry:
+        raise NotImplementedError
+
+    async def arm(self) -> None: ...
+
+    async def take_off(self, timeout_s: float) -> None: ...
+
+    async def start_offboard(self, first: CourseSpeedCommand) -> None: ...
+
+    async def send(self, command: CourseSpeedCommand) -> None: ...
+
+    async def hold(self) -> None: ...
+
+    async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
+        await asyncio.Event().wait()
+        yield  # type: ignore[misc]  # never reached: no telemetry
+
+    async def observations(self) -> AsyncIterator[TargetObservation]:
+        while True:
+            yield await self.seen.get()
+
+    async def events(self) -> AsyncIterator[LinkEvent]:
+        await asyncio.Event().wait()
+        yield  # type: ignore[misc]
+
+
+class Events:
+    def __init__(self) -> None:
+        self.kinds: list[str] = []
+
+    def emit(self, kind: str, t_s: float, **fields: object) -> None:
+        self.kinds.append(kind)
+
+
+async def until(predicate: Callable[[], bool]) -> None:
+    """Wait for the agent's state to satisfy ``predicate`` (nothing signals it: poll)."""
+    async with asyncio.timeout(WAIT_S):
+        while not predicate():  # noqa: ASYNC110
+            await asyncio.sleep(0.001)
+
+
+@pytest.mark.parametrize("queued", [1, 5])
+async def test_only_the_newest_of_the_fused_estimates_waiting_is_applied(queued: int) -> None:
+    """Fused estimates that queued up while the agent was busy are history once a newer one
+    is there: the agent applies the newest alone (each application replays the local filter's
+    recent observations; applying every stale one in turn is how a loaded agent fell behind)."""
+    plan = build_plan(load_config("hil", MissionConfig))
+    params = plan.agents[0]
+    assert params.main is not None
+    assert params.main.feedback == "modewise"
+    broker = InProcessBroker()
+    link = CameraOnlyLink()
+    async with (
+        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="ground") as ground,
+        asyncio.TaskGroup() as tg,
+    ):
+        agent = VehicleAgent(params, link, agent_bus, Events())
+        running = tg.create_task(agent.run())
+        for k in range(3):  # the local filter starts on the camera's observations
+            link.seen.put_nowait(TargetObservation(1, 0.1 * k, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0))
+        await until(lambda: agent.state.local.counters.updated >= 2)
+        local = agent.state.local.estimate()
+        assert local is not None
+        before = agent.state.local.counters.feedback
+        for k in range(queued):  # all arrive at once: the agent has not had a turn meanwhile
+            fused = GlobalEstimate(
+                t_s=local.t_s + 0.01 * k,
+                x=local.x + np.array([k, 0.0, 0.0, 0.0, 0.0, 0.0]),
+                p=local.p,
+                beta=((params.sensor, 1.0),),
+                mu=local.mu,
+                model_x=local.model_x,
+                model_p=local.model_p,
+            )
+            payload = codec.encode(global_to_bus(fused, "ground"))
+            ground.inject_raw(str(topics.GLOBAL_ESTIMATE), payload)
+        newest = local.t_s + 0.01 * (queued - 1)
+        await until(lambda: agent.state.fused is not None and agent.state.fused.t_s == newest)
+        await asyncio.sleep(0.05)  # time enough for any older one to be applied after it
+        assert agent.state.local.counters.feedback - before == 1
+        assert agent_bus.stats.dropped == queued - 1
+        running.cancel()
