@@ -1,6 +1,7 @@
 """Latency compensation (``agent.predict_own``, ``MissionAgentParams.latency_s``) and the flyable
 speed along an orbit around a moving target (``guidance.orbit_speed_profile`` / ``_cap``)."""
 
+import functools
 import math
 from dataclasses import replace
 
@@ -64,9 +65,11 @@ def test_prediction_of_zero_time_is_the_telemetry_itself() -> None:
         predict_own(own, 2.0, 18.0, ENV, math.nan)
 
 
+@functools.cache
 def _fly(latency_ticks: int, latency_s: float, hold_s: float) -> tuple[float, np.ndarray]:
     """The mission fast-sim to a minute into the 7 m/s leg: its RMS distance error there and
-    every command (t, vehicle, course, speed, implied course rate when it acts)."""
+    every command (t, vehicle, course, speed, implied course rate when it acts). Cached: the
+    run without delay or compensation serves two tests."""
     plan = build_plan(load_config("hil", MissionConfig))
     agents = tuple(replace(a, latency_s=latency_s, hold_s=hold_s) for a in plan.agents)
     setup = MissionSimSetup(
