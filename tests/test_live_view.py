@@ -11,9 +11,10 @@ ROWS = (
 )
 
 
-def test_plain_output_is_throttled_to_mission_time():
+def test_plain_output_is_throttled_to_mission_time_one_unbroken_line_each():
     out = io.StringIO()
-    console = Console(file=out, force_terminal=False, width=200)
+    # a log file or pipe: rich assumes 80 columns there; a line must not be broken at them
+    console = Console(file=out, force_terminal=False, width=60)
     with LiveView(console, plain_interval_s=10.0) as view:
         for t in range(25):
             view.update(MissionSnapshot(float(t), 100.0, "adjust", "wait", ROWS))

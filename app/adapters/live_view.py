@@ -86,7 +86,9 @@ class LiveView:
             self._last_plain_t is None or snapshot.t_s - self._last_plain_t >= self._interval
         ):
             self._last_plain_t = snapshot.t_s
-            self._console.print(self.plain_line(snapshot), highlight=False, markup=False)
+            self._console.print(
+                self.plain_line(snapshot), highlight=False, markup=False, soft_wrap=True
+            )
 
     @staticmethod
     def plain_line(snapshot: MissionSnapshot) -> str:

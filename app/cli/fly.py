@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
     plan = build_plan(config, args.vehicles)
     out = args.out or default_out_dir(config.name)
     console = Console()
-    console.print(f"standoff fly: {config.name}, {plan.count} vehicles, run folder {out}")
+    console.print(
+        f"standoff fly: {config.name}, {plan.count} vehicles, run folder {out}", soft_wrap=True
+    )
     view = LiveView(console) if not args.quiet else None
     with view if view is not None else contextlib.nullcontext():
         result = asyncio.run(
@@ -81,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
                 on_snapshot=view.update if view is not None else None,
             )
         )
-    console.print(report(result.summary), highlight=False, markup=False)
+    console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)
     return 0
 
 
