@@ -1,6 +1,7 @@
 """The mission's track stage: the paper's guidance against this project's, in the mission fast-sim.
 
 Run:  .venv/bin/python -m benchmarks.bench_track [CONFIG] [--seeds 1 2 3] [--latency-ticks 1]
+      [--vary-command S] [--truth]
 
 Flies the whole mission (``app.runtime.mission_fastsim``: IMM-UKF per vehicle on a seeded
 sigma^2 = 10 m^2 camera, the ground's fusion fed back, stages, 10 Hz control), with commands
@@ -15,7 +16,10 @@ all on the same seeds:
   vehicle has (``speed_cap``);
 - +latency: planned, the agents steering on the state predicted for the middle of each
   command's 0.1 s hold, ``--latency-ticks`` * 0.1 s late (``latency_s``, ``hold_s``);
-- +both: planned with the cap and the latency compensation.
+- +both: planned with the cap and the latency compensation;
+- with ``--truth``, also +truth: +latency with every agent steering on the true target
+  (``MissionSimSetup.truth_fed``), what guidance and phase keeping give with perfect knowledge
+  of the target, which separates their share of the errors from the estimation's.
 
 ``--vary-command S`` makes seed k also give the tracking command k * S seconds later, so the
 team meets the target's turns in another configuration each time (which vehicle is where, at
@@ -69,9 +73,10 @@ def variant(
     return replace(plan, agents=tuple(agents))
 
 
-def fly(plan: MissionPlan, seed: int, latency: int) -> dict:
+def fly(plan: MissionPlan, seed: int, latency: int, truth_fed: bool = False) -> dict:
     t0 = time.process_time()
-    result = run_mission_sim(MissionSimSetup(plan, seed=seed, latency_ticks=latency))
+    setup = MissionSimSetup(plan, seed=seed, latency_ticks=latency, truth_fed=truth_fed)
+    result = run_mission_sim(setup)
     cpu = time.process_time() - t0
     lim = plan.config.limits
     cmd = result.commands
@@ -118,6 +123,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     parser.add_argument("--latency-ticks", type=int, default=0)
     parser.add_argument(
+        "--truth", action="store_true", help="also fly +latency with the true target (+truth)"
+    )
+    parser.add_argument(
         "--vary-command",
         type=float,
         default=0.0,
@@ -133,8 +141,12 @@ def main() -> None:
         moved = config.model_copy(
             update={"tracking_command_s": config.tracking_command_s + args.vary_command * seed}
         )
-        for name, p in variants(build_plan(moved), lag).items():
+        plans = variants(build_plan(moved), lag)
+        for name, p in plans.items():
             runs.setdefault(name, []).append(fly(p, seed, args.latency_ticks))
+        if args.truth:
+            truth = fly(plans["+latency"], seed, args.latency_ticks, truth_fed=True)
+            runs.setdefault("+truth", []).append(truth)
     figures = {name: mean_figures(rs, labels) for name, rs in runs.items()}
     print(
         f"mission fast-sim '{config.name}', seeds {args.seeds} (tracking command moved "

@@ -67,3 +67,17 @@ def test_bad_setups_are_rejected(plan):
 def test_track_figures_read_the_summary_parts(plan):
     result = _short(plan)
     assert track_figures(result, plan.target.labels) == {}
+
+
+def test_truth_fed_agents_steer_on_the_true_target_not_their_estimates():
+    # a camera so noisy (50 m per axis) that steering on the estimates is visibly worse
+    plan = build_plan(load_config("test-short", MissionConfig))
+    figures = {}
+    for truth_fed in (False, True):
+        setup = MissionSimSetup(
+            plan, seed=1, camera_sigma2_m2=2500.0, end_t_s=85.0, truth_fed=truth_fed
+        )
+        result = run_mission_sim(setup)
+        figures[truth_fed] = track_figures(result, plan.target.labels)["A-B"]["dist_rms_m"]
+    assert figures[True] < 3.0
+    assert figures[False] > 3.0 * figures[True]

@@ -40,7 +40,10 @@ from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 @dataclass(frozen=True, slots=True)
 class MissionSimSetup:
     """A plan and the timing of the loop (s). ``seed`` seeds the cameras; ``camera_sigma2_m2``
-    is the per-axis noise variance; ``end_t_s`` defaults to the plan's end."""
+    is the per-axis noise variance; ``end_t_s`` defaults to the plan's end. With
+    ``truth_fed`` the agents steer on the true target (position and velocity, exact, every tick)
+    instead of their estimates: what guidance and phase keeping do with perfect knowledge of
+    the target (the estimators, the fusion and the stages still run as usual)."""
 
     plan: MissionPlan
     seed: int = 1
@@ -54,6 +57,7 @@ class MissionSimSetup:
     end_t_s: float | None = None
     track_override: tuple[AgentParams, ...] | None = None
     vehicle_limits: FixedWingLimits | None = None
+    truth_fed: bool = False
 
     def __post_init__(self) -> None:
         for name in (
@@ -121,6 +125,16 @@ def _starts(plan: MissionPlan) -> list[FixedWingState]:
             )
         )
     return out
+
+
+def _truth_estimate(t_s: float, truth: Any) -> GlobalEstimate:
+    """The true target as a fused estimate (no uncertainty to speak of): what ``truth_fed``
+    agents steer on."""
+    x = np.array(
+        [truth.east_m, truth.v_east_m_s, truth.north_m, truth.v_north_m_s, 0.0, 0.0],
+        dtype=np.float64,
+    )
+    return GlobalEstimate(t_s, x, np.eye(6) * 1e-6, ())
 
 
 def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
@@ -206,6 +220,9 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
             )
         )
         # 4. control
+        if setup.truth_fed:
+            exact = _truth_estimate(t, truth)
+            states = [replace(s, fused=exact) for s in states]
         out = []
         for i, v in enumerate(vehicles):
             own = OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
