@@ -439,3 +439,28 @@ async def test_arduplane_stop_loiters():
     await adapter.stop()
     ((_, _, _, fields),) = commands.sent
     assert (fields["command"], fields["param1"], fields["param2"]) == (176, 1.0, 12.0)
+
+
+async def test_arduplane_without_a_course_rate_limit_does_not_send_a_lateral_accel_of_zero():
+    # ArduPlane takes GUIDED_CHANGE_HEADING param3 as at least 0.05 m/s^2 (MAX(param3, 0.05f)):
+    # 0 would bank it by 0.3 degrees. Unlimited must be a value that leaves the turn to it.
+    commands = CommandRecorder()
+    free = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=None)
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=free)
+    await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
+    heading = commands.sent[0][3]
+    assert heading["command"] == 43002
+    assert heading["param3"] >= 9.81 * math.tan(math.radians(80.0))
+
+
+async def test_arduplane_takes_off_in_takeoff_mode():
+    commands = CommandRecorder()
+    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    await adapter.take_off()
+    ((name, _, _, fields),) = commands.sent
+    assert (name, fields["command"], fields["param1"], fields["param2"]) == (
+        "COMMAND_LONG",
+        176,
+        1.0,
+        13.0,
+    )

@@ -61,6 +61,11 @@ MAV_RESULT_NAMES: Final = {
 }
 ARDUPLANE_GUIDED: Final = 15
 ARDUPLANE_LOITER: Final = 12
+ARDUPLANE_TAKEOFF: Final = 13
+#: GUIDED_CHANGE_HEADING param3 when the course rate is unlimited: ArduPlane takes at least
+#: 0.05 m/s^2 (``MAX(param3, 0.05f)``, so 0 would barely turn) and banks no more than its own
+#: roll limit, so a value this large leaves the turn to the airframe
+UNLIMITED_LATERAL_ACCEL_M_S2: Final = 1000.0
 
 PX4_MAIN_MODES: Final = {
     1: "MANUAL",
@@ -602,7 +607,9 @@ class ArduPlaneAdapter:
 
     Each goes out when it changes by more than its deadband; ArduPlane keeps the last one until
     the mode changes. The heading command's param3 is the allowed centripetal acceleration,
-    speed * max course rate (m/s^2).
+    speed * max course rate (m/s^2); ArduPlane banks at most atan(param3 / g), so its course
+    rate stays under param3 / speed. Take-off is TAKEOFF mode: ArduPlane refuses
+    MAV_CMD_NAV_TAKEOFF (which MAVSDK's ``Action.takeoff`` sends) unless it is a QuadPlane.
     """
 
     vehicle_id: int
@@ -637,7 +644,7 @@ class ArduPlaneAdapter:
 
     def heading_command(self, course_rad: float, speed_m_s: float) -> MavlinkMessage:
         rate = self.limits.max_course_rate_rad_s
-        max_lateral_accel = speed_m_s * rate if rate is not None else 0.0
+        max_lateral_accel = speed_m_s * rate if rate is not None else UNLIMITED_LATERAL_ACCEL_M_S2
         return command_int(
             self.vehicle_id,
             self.target_component,
@@ -665,6 +672,10 @@ class ArduPlaneAdapter:
 
     async def _send(self, message: MavlinkMessage, what: str) -> None:
         await send_checked_command(self.commands, message, self.vehicle_id, what)
+
+    async def take_off(self) -> None:
+        """Switch to TAKEOFF mode: an armed ArduPlane climbs out and loiters ahead."""
+        await self._send(self.mode_command(ARDUPLANE_TAKEOFF), "take-off (mode change to TAKEOFF)")
 
     async def start(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState

@@ -704,7 +704,7 @@ class MavsdkVehicleLink:
         return self._in_air or (latest is not None and latest.in_air)
 
     async def take_off(self, timeout_s: float) -> None:
-        self._require_adapter()
+        adapter = self._require_adapter()
         # decide on a frame newer than the call: arming may just have launched the vehicle
         before = self._latest
         with contextlib.suppress(LinkError):
@@ -715,10 +715,14 @@ class MavsdkVehicleLink:
             )
         if self._airborne():
             return
-        try:
-            await self._action.takeoff()
-        except ActionError as exc:
-            raise LinkError(f"vehicle {self._id}: take-off refused: {exc.result.name}") from exc
+        if isinstance(adapter, ArduPlaneAdapter):
+            # MAVSDK's takeoff sends NAV_TAKEOFF, which ArduPlane refuses unless a QuadPlane
+            await adapter.take_off()
+        else:
+            try:
+                await self._action.takeoff()
+            except ActionError as exc:
+                raise LinkError(f"vehicle {self._id}: take-off refused: {exc.result.name}") from exc
         await self._wait_for(self._airborne, timeout_s, "not in the air after take-off")
 
     def _state(self) -> VehicleState:
