@@ -164,6 +164,8 @@ def stationary_target(east_m: float = 0.0, north_m: float = 0.0) -> TargetPath:
 
 
 FailsafeAction = Literal["hold", "return"]
+Autopilot = Literal["px4", "arduplane"]
+GcsFailsafe = Literal["off", "continue", "return"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,6 +183,11 @@ class SimConfig:
     Failsafe: in offboard, when no setpoint has come for ``offboard_timeout_s`` of simulated
     time (and at least ``offboard_timeout_min_wall_s`` of wall time, since clients resend
     setpoints at a wall-clock rate), the vehicle does ``failsafe_action``.
+
+    Autopilot: ``"px4"`` (the default) imitates PX4; ``"arduplane"`` imitates ArduPlane
+    (``sitl.arduplane``), whose GCS failsafe is ``gcs_failsafe`` (FS_GCS_ENABL and FS_LONG_ACTN:
+    off, as ArduPlane's default; continue; return = RTL) after ``gcs_failsafe_timeout_s``
+    (FS_LONG_TIMEOUT) without a HEARTBEAT from system ``gcs_system_id`` (SYSID_MYGCS).
     """
 
     vehicles: tuple[VehicleConfig, ...]
@@ -199,6 +206,10 @@ class SimConfig:
     offboard_timeout_s: float = 1.0
     offboard_timeout_min_wall_s: float = 0.25
     failsafe_action: FailsafeAction = "hold"
+    autopilot: Autopilot = "px4"
+    gcs_failsafe: GcsFailsafe = "off"
+    gcs_failsafe_timeout_s: float = 5.0
+    gcs_system_id: int = 255
     camera: CameraConfig = field(default_factory=CameraConfig)
     wind: WindConfig = field(default_factory=WindConfig)
 
@@ -227,3 +238,12 @@ class SimConfig:
             raise ValueError(
                 f"failsafe_action must be 'hold' or 'return', got {self.failsafe_action!r}"
             )
+        if self.autopilot not in ("px4", "arduplane"):
+            raise ValueError(f"autopilot must be 'px4' or 'arduplane', got {self.autopilot!r}")
+        if self.gcs_failsafe not in ("off", "continue", "return"):
+            raise ValueError(
+                f"gcs_failsafe must be 'off', 'continue' or 'return', got {self.gcs_failsafe!r}"
+            )
+        _positive("gcs_failsafe_timeout_s", self.gcs_failsafe_timeout_s)
+        if not 1 <= self.gcs_system_id <= 255:
+            raise ValueError(f"gcs_system_id must be in 1..255, got {self.gcs_system_id!r}")

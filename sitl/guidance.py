@@ -42,7 +42,18 @@ class LineCommand:
     speed_m_s: float
 
 
-Command = VelocityCommand | LoiterCommand | LineCommand
+@dataclass(frozen=True, slots=True)
+class CourseCommand:
+    """Fly a course over ground at an airspeed, turning with at most a lateral acceleration
+    (ArduPlane GUIDED after MAV_CMD_GUIDED_CHANGE_HEADING). ``guide`` returns the course as
+    given; the vehicle turns it into the heading that holds it in the wind."""
+
+    course_rad: float
+    speed_m_s: float
+    max_lateral_accel_m_s2: float
+
+
+Command = VelocityCommand | LoiterCommand | LineCommand | CourseCommand
 
 
 def guide(state: FixedWingState, cmd: Command, course_gain_per_s: float) -> tuple[float, float]:
@@ -53,7 +64,7 @@ def guide(state: FixedWingState, cmd: Command, course_gain_per_s: float) -> tupl
     through the course loop's gain so the P loop of eq. (2) settles on the circle, not off it.
     At the centre (r -> 0) the bearing is undefined: fly the current course outward.
     """
-    if isinstance(cmd, VelocityCommand):
+    if isinstance(cmd, VelocityCommand | CourseCommand):
         return cmd.course_rad, cmd.speed_m_s
     if isinstance(cmd, LineCommand):
         right_e, right_n = math.cos(cmd.course_rad), -math.sin(cmd.course_rad)

@@ -27,6 +27,7 @@ from typing import Self
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl.arduplane import ArduPlaneVehicle
 from sitl.camera import Observation, TrackingCamera
 from sitl.config import SimConfig, WindConfig
 from sitl.geodesy import AnchoredGeodesy, Geodesy
@@ -144,8 +145,9 @@ class SimulatorServer:
         self._geodesy = Geodesy(config.origin_lat_deg, config.origin_lon_deg, config.origin_alt_m)
         seeds = np.random.SeedSequence(config.seed).spawn(len(config.vehicles) + 1)
         self._wind_rng = np.random.default_rng(seeds[0])
+        personality = ArduPlaneVehicle if config.autopilot == "arduplane" else SimVehicle
         self.vehicles = tuple(
-            SimVehicle(
+            personality(
                 i,
                 vc,
                 config,

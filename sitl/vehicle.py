@@ -10,7 +10,7 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -32,6 +32,16 @@ PX4_MAIN_OFFBOARD: Final = 6
 PX4_SUB_AUTO_TAKEOFF: Final = 2
 PX4_SUB_AUTO_LOITER: Final = 3
 PX4_SUB_AUTO_RTL: Final = 5
+
+
+class FlightMode(Protocol):
+    """A flight mode as the heartbeat reports it: a name for the truth, the custom_mode."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def custom_mode(self) -> int: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,7 +166,7 @@ class SimVehicle:
         self._home_lla = geodesy.to_geodetic(self.home_east_m, self.home_north_m, 0.0)
         self.armed = False
         self.in_air = False
-        self.mode = HOLD
+        self.mode: FlightMode = HOLD
         self.command: Command | None = None
         self.cruise_speed_m_s = config.cruise_speed_m_s
         self.offboard_setpoint: Command | None = None
@@ -209,8 +219,17 @@ class SimVehicle:
         self, dt_s: float, t_s: float, wall_s: float, wind_east_m_s: float, wind_north_m_s: float
     ) -> list[Outgoing]:
         """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s`` in the wind."""
-        out: list[Outgoing] = []
         self.wind_east_m_s, self.wind_north_m_s = wind_east_m_s, wind_north_m_s
+        out = self._mode_events(t_s, wall_s)
+        if not self.in_air:
+            return out
+        self._fly(dt_s)
+        self._battery_fraction = max(0.0, self._battery_fraction - dt_s / 3600.0)
+        return out
+
+    def _mode_events(self, t_s: float, wall_s: float) -> list[Outgoing]:
+        """Mode changes that happen on their own at ``t_s``: failsafe, end of take-off."""
+        out: list[Outgoing] = []
         if self.mode is OFFBOARD and self._offboard_lost(t_s, wall_s):
             action = RETURN if self.failsafe_action == "return" else HOLD
             self._set_mode(action, t_s)
@@ -222,8 +241,10 @@ class SimVehicle:
         if self.mode is TAKEOFF and t_s - self._mode_entered_t_s >= TAKEOFF_DURATION_S:
             self._set_mode(HOLD, t_s)
             out.append(self._statustext(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding"))
-        if not self.in_air:
-            return out
+        return out
+
+    def _fly(self, dt_s: float) -> None:
+        """One physics step in the air, flying the current command (in the current wind)."""
         if self.mode is OFFBOARD and self.offboard_setpoint is not None:
             self.command = self.offboard_setpoint
         course_cmd, speed_cmd = guide(
@@ -235,11 +256,9 @@ class SimVehicle:
             speed_cmd,
             self.config.limits,
             dt_s,
-            wind_east_m_s,
-            wind_north_m_s,
+            self.wind_east_m_s,
+            self.wind_north_m_s,
         )
-        self._battery_fraction = max(0.0, self._battery_fraction - dt_s / 3600.0)
-        return out
 
     def _offboard_lost(self, t_s: float, wall_s: float) -> bool:
         return (
@@ -260,7 +279,7 @@ class SimVehicle:
             speed_m_s=self.cruise_speed_m_s,
         )
 
-    def _set_mode(self, mode: Px4Mode, t_s: float) -> None:
+    def _set_mode(self, mode: FlightMode, t_s: float) -> None:
         self.mode = mode
         self._mode_entered_t_s = t_s
         if mode is HOLD or mode is TAKEOFF:
@@ -305,7 +324,9 @@ class SimVehicle:
                 msg.param6,
                 msg.param7,
             )
-            return self._on_command(msg, msg.command, params, msg.target_component, t_s, wall_s)
+            return self._on_command(
+                msg, msg.command, params, msg.target_component, t_s, wall_s, None
+            )
         if msg_id == mavlink.MAVLINK_MSG_ID_COMMAND_INT:
             params = (
                 msg.param1,
@@ -316,7 +337,9 @@ class SimVehicle:
                 msg.y / 1e7,
                 msg.z,
             )
-            return self._on_command(msg, msg.command, params, msg.target_component, t_s, wall_s)
+            return self._on_command(
+                msg, msg.command, params, msg.target_component, t_s, wall_s, msg.frame
+            )
         if msg_id == mavlink.MAVLINK_MSG_ID_PING and msg.target_system == 0:
             reply = mavlink.MAVLink_ping_message(
                 msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent()
@@ -396,17 +419,19 @@ class SimVehicle:
         target_component: int,
         t_s: float,
         wall_s: float,
+        frame: int | None,
     ) -> list[Outgoing]:
+        """A COMMAND_LONG (``frame`` None) or COMMAND_INT, answered with COMMAND_ACK."""
         requester = (msg.get_srcSystem(), msg.get_srcComponent())
         if target_component == CAMERA_COMPONENT:
             return [self._ack(command, mavlink.MAV_RESULT_UNSUPPORTED, requester, CAMERA_COMPONENT)]
         if target_component not in (0, AUTOPILOT_COMPONENT):
             return []
-        result, extra = self._run_command(command, p, t_s, wall_s)
+        result, extra = self._run_command(command, p, t_s, wall_s, frame)
         return [self._ack(command, result, requester), *extra]
 
     def _run_command(
-        self, command: int, p: tuple[float, ...], t_s: float, wall_s: float
+        self, command: int, p: tuple[float, ...], t_s: float, wall_s: float, frame: int | None
     ) -> tuple[int, list[Outgoing]]:
         accepted, denied = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
@@ -451,7 +476,7 @@ class SimVehicle:
             return self._reposition(p, t_s)
         return mavlink.MAV_RESULT_UNSUPPORTED, []
 
-    def _enter(self, mode: Px4Mode, t_s: float) -> tuple[int, list[Outgoing]]:
+    def _enter(self, mode: FlightMode, t_s: float) -> tuple[int, list[Outgoing]]:
         changed = mode is not self.mode
         self._set_mode(mode, t_s)
         if mode is TAKEOFF and self.armed and not self.in_air:
@@ -617,9 +642,9 @@ class SimVehicle:
     def _build(self, msg_id: int, t_s: float, geo: GeoLookup) -> mavlink.MAVLink_message | None:
         s = self.state
         if msg_id == _HEARTBEAT_ID:
-            return telemetry.heartbeat(self.mode.custom_mode, self.armed)
+            return self._heartbeat_message()
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            return telemetry.autopilot_version(self.system_id)
+            return self._autopilot_version()[1]
         if msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
             return telemetry.home_position(
                 *self._home_lla, self.home_east_m, self.home_north_m, t_s
@@ -652,8 +677,11 @@ class SimVehicle:
         s = self.state
         return s.v_north_m_s + self.wind_north_m_s, s.v_east_m_s + self.wind_east_m_s
 
+    def _heartbeat_message(self) -> mavlink.MAVLink_message:
+        return telemetry.heartbeat(self.mode.custom_mode, self.armed)
+
     def _heartbeat(self) -> Outgoing:
-        return AUTOPILOT_COMPONENT, telemetry.heartbeat(self.mode.custom_mode, self.armed)
+        return AUTOPILOT_COMPONENT, self._heartbeat_message()
 
     def _autopilot_version(self) -> Outgoing:
         return AUTOPILOT_COMPONENT, telemetry.autopilot_version(self.system_id)

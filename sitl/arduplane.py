@@ -1,0 +1,500 @@
+"""One simulated ArduPlane: its heartbeat, flight modes, GUIDED slew commands and GCS failsafe.
+
+The ArduPlane personality of ``sitl.vehicle.SimVehicle`` (select it with
+``SimConfig(autopilot="arduplane")``). What it answers was read off ArduPilot's source
+(docs/simulator.md lists the files): mode numbers of ArduPlane/mode.h; HEARTBEAT of
+GCS_MAVLink_Plane.cpp (``base_mode``, ``custom_mode`` = the mode number); DO_SET_MODE of
+GCS_Common.cpp ``_set_mode_common`` (a mode it cannot enter is MAV_RESULT_FAILED); the
+MAV_CMD_GUIDED_CHANGE_HEADING / _SPEED / _ALTITUDE checks of
+``handle_command_int_guided_slew_commands``; NAV_TAKEOFF refused unless a QuadPlane; the GCS
+failsafe of ``check_long_failsafe`` / ``failsafe_long_on_event``.
+"""
+
+import logging
+import math
+from dataclasses import dataclass, replace
+from typing import Final
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl.camera import TrackingCamera
+from sitl.config import SimConfig, VehicleConfig
+from sitl.fixedwing import FixedWingState, step, wrap_pi
+from sitl.geodesy import Geodesy
+from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
+from sitl.vehicle import AUTOPILOT_COMPONENT, FlightMode, Outgoing, SimVehicle
+
+log = logging.getLogger(__name__)
+
+# ardupilotmega dialect commands (not in pymavlink's common dialect)
+MAV_CMD_GUIDED_CHANGE_SPEED: Final = 43000
+MAV_CMD_GUIDED_CHANGE_ALTITUDE: Final = 43001
+MAV_CMD_GUIDED_CHANGE_HEADING: Final = 43002
+HEADING_TYPE_COURSE_OVER_GROUND: Final = 0
+HEADING_TYPE_HEADING: Final = 1
+HEADING_TYPE_DEFAULT: Final = 2
+SPEED_TYPE_AIRSPEED: Final = 0
+
+#: GUIDED_CHANGE_HEADING's param3 below this is taken as this (m/s^2): ``MAX(param3, 0.05f)``
+MIN_LATERAL_ACCEL_M_S2: Final = 0.05
+#: TECS_CLMB_MAX and TECS_SINK_MIN/MAX defaults are about 5 m/s: the airframe's climb limit
+MAX_CLIMB_RATE_M_S: Final = 5.0
+#: TKOFF_DIST default: TAKEOFF mode loiters this far ahead of the launch point (m)
+TAKEOFF_LOITER_DISTANCE_M: Final = 200.0
+#: GCS heartbeats come at a wall-clock rate (MAVSDK: 1 Hz), so the failsafe also waits this
+#: much wall time of silence (the offboard failsafe's reason, see SimConfig)
+GCS_FAILSAFE_MIN_WALL_S: Final = 2.5
+FAILSAFE_GCS: Final = 3  # failsafe_state in ArduPlane/defines.h
+MODE_REASON_GCS_FAILSAFE: Final = 5  # ModeReason::GCS_FAILSAFE (AP_Vehicle/ModeReason.h)
+
+
+@dataclass(frozen=True, slots=True)
+class ArduPlaneMode:
+    """An ArduPlane flight mode: HEARTBEAT.custom_mode is its number (ArduPlane/mode.h)."""
+
+    name: str
+    number: int
+
+    @property
+    def custom_mode(self) -> int:
+        return self.number
+
+
+MANUAL: Final = ArduPlaneMode("manual", 0)
+CIRCLE: Final = ArduPlaneMode("circle", 1)
+AUTO: Final = ArduPlaneMode("auto", 10)
+RTL: Final = ArduPlaneMode("rtl", 11)
+LOITER: Final = ArduPlaneMode("loiter", 12)
+TAKEOFF: Final = ArduPlaneMode("takeoff", 13)
+GUIDED: Final = ArduPlaneMode("guided", 15)
+_NAMED: Final = {m.number: m for m in (MANUAL, CIRCLE, AUTO, RTL, LOITER, TAKEOFF, GUIDED)}
+#: fixed-wing modes of ArduPlane/mode.h that are not named above (entered, flown straight on)
+_OTHER_MODES: Final = {
+    2: "stabilize",
+    3: "training",
+    4: "acro",
+    5: "fbwa",
+    6: "fbwb",
+    7: "cruise",
+    8: "autotune",
+    14: "avoid_adsb",
+    24: "thermal",
+}
+#: QuadPlane modes (refused: this is not a QuadPlane) and numbers ArduPlane has not
+#: (9, 16 = INITIALISING, > 25) are refused with MAV_RESULT_FAILED
+_LOITERING: Final = (CIRCLE, AUTO, LOITER)
+_GUIDED_LIKE: Final = {GUIDED.number, 14}  # Mode::is_guided_mode(): GUIDED, AVOID_ADSB
+#: modes in which the GCS failsafe's "continue" continues (failsafe_long_on_event)
+_FAILSAFE_CONTINUES: Final = {AUTO.number, GUIDED.number, LOITER.number, 14, 24}
+
+_ALT_FRAMES_RELATIVE: Final = {
+    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT,  # flat terrain at the origin: terrain = relative
+    mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+}
+_ALT_FRAMES_ABSOLUTE: Final = {mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT}
+
+# HEARTBEAT.base_mode bits (GCS_MAVLINK_Plane::base_mode)
+_CUSTOM: Final = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+_GUIDED_FLAG: Final = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+_STABILIZE: Final = mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+_MANUAL_INPUT: Final = mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED  # STICK_MIXING default
+_ARMED: Final = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+
+ARDUPILOT_CAPABILITIES: Final = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+)
+ARDUPLANE_VERSION: Final = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reports ArduPlane 4.5.7
+
+
+def mode_by_number(number: int) -> ArduPlaneMode | None:
+    """The fixed-wing ArduPlane mode with this number, None for QuadPlane or unknown ones."""
+    if number in _NAMED:
+        return _NAMED[number]
+    name = _OTHER_MODES.get(number)
+    return None if name is None else ArduPlaneMode(name, number)
+
+
+def heading_for_ground_course(
+    course_rad: float, airspeed_m_s: float, wind_east_m_s: float, wind_north_m_s: float
+) -> float:
+    """The heading through the air whose ground track is ``course_rad`` in the wind.
+
+    The wind's component across the course is cancelled: sin(heading - course) = -w_cross / V.
+    A cross wind the airspeed cannot cancel (|w_cross| >= V) is turned into as far as it can be
+    (90 degrees), the best the aircraft can do.
+    """
+    if airspeed_m_s <= 0.0:
+        return course_rad
+    right_e, right_n = math.cos(course_rad), -math.sin(course_rad)  # unit vector to the right
+    cross = wind_east_m_s * right_e + wind_north_m_s * right_n
+    ratio = max(-1.0, min(1.0, -cross / airspeed_m_s))
+    return wrap_pi(course_rad + math.asin(ratio))
+
+
+class ArduPlaneVehicle(SimVehicle):
+    """A simulated ArduPlane (plain fixed wing, no QuadPlane) behind one MAVLink system id.
+
+    It boots in MANUAL on the ground. Arming does not launch it (a real one needs throttle);
+    entering TAKEOFF while armed (or arming in TAKEOFF) launches it, as a catapult would, and it
+    loiters 200 m ahead at its altitude, staying in TAKEOFF. GUIDED flies, from the moment it
+    is entered, a loiter where it is until MAV_CMD_GUIDED_CHANGE_HEADING gives it a course over
+    ground; the guided targets last until the mode changes. It takes no offboard setpoints and
+    has no parameters.
+    """
+
+    def __init__(
+        self,
+        index: int,
+        config: VehicleConfig,
+        sim: SimConfig,
+        camera: TrackingCamera,
+        geodesy: Geodesy,
+    ) -> None:
+        super().__init__(index, config, sim, camera, geodesy)
+        self.mode = MANUAL
+        self.command = None
+        self._air_altitude_m = self.config.altitude_m
+        self._reset_guided()
+        self.gcs_failsafe = self._sim.gcs_failsafe
+        self.gcs_failsafe_active = False
+        self._gcs_seen_t_s: float | None = None
+        self._gcs_seen_wall_s = -math.inf
+        #: modes the GCS may not enter (FLTMODE_GCSBLOCK); a test sets it to refuse a mode
+        self.gcs_blocked_modes: frozenset[int] = frozenset()
+
+    def _reset_guided(self) -> None:
+        """Mode::enter resets the guided slew targets on every mode change."""
+        self._guided_course_rad: float | None = None
+        self._guided_lateral_accel_m_s2 = MIN_LATERAL_ACCEL_M_S2
+        self._guided_speed_m_s: float | None = None
+        self._guided_accel_m_s2 = math.inf
+        self._guided_altitude_m: float | None = None
+        self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S
+
+    # ---- state -------------------------------------------------------------------------------
+
+    @property
+    def altitude_m(self) -> float:
+        return self._air_altitude_m if self.in_air else 0.0
+
+    @property
+    def guided_targets(self) -> tuple[float | None, float | None, float | None]:
+        """(course over ground rad, airspeed m/s, altitude m) set by the guided slew commands."""
+        return self._guided_course_rad, self._guided_speed_m_s, self._guided_altitude_m
+
+    # ---- modes -------------------------------------------------------------------------------
+
+    def _set_mode(self, mode: FlightMode, t_s: float) -> None:
+        assert isinstance(mode, ArduPlaneMode), mode
+        if mode != self.mode:
+            self._reset_guided()
+        self.mode = mode
+        self._mode_entered_t_s = t_s
+        self.command = self._mode_command(mode)
+
+    def _mode_command(self, mode: ArduPlaneMode) -> LoiterCommand | VelocityCommand | None:
+        if not self.in_air:
+            return None
+        if mode in _LOITERING or mode == GUIDED:
+            return self._hold_here()  # GUIDED: set_guided_WP(current location)
+        if mode == RTL:
+            return LoiterCommand(
+                self.home_east_m,
+                self.home_north_m,
+                self.loiter_radius_m,
+                self.config.loiter_clockwise,
+                self.cruise_speed_m_s,
+            )
+        if mode == TAKEOFF:
+            course = self.state.course_rad
+            return LoiterCommand(
+                self.home_east_m + TAKEOFF_LOITER_DISTANCE_M * math.sin(course),
+                self.home_north_m + TAKEOFF_LOITER_DISTANCE_M * math.cos(course),
+                self.loiter_radius_m,
+                self.config.loiter_clockwise,
+                self.cruise_speed_m_s,
+            )
+        return VelocityCommand(self.state.course_rad, self.cruise_speed_m_s)  # straight on
+
+    def _change_mode(self, number: int, t_s: float) -> tuple[int, list[Outgoing]]:
+        """Plane::set_mode for a GCS request: MAV_RESULT_FAILED when it cannot be entered."""
+        mode = mode_by_number(number)
+        if mode is None:
+            return mavlink.MAV_RESULT_FAILED, []
+        if number in self.gcs_blocked_modes and mode != self.mode:
+            text = (
+                f"Mode change to {mode.name.upper()} denied, GCS entry disabled (FLTMODE_GCSBLOCK)"
+            )
+            return mavlink.MAV_RESULT_FAILED, [self._statustext(mavlink.MAV_SEVERITY_NOTICE, text)]
+        changed = mode != self.mode
+        if changed:
+            self._set_mode(mode, t_s)
+        if mode == TAKEOFF and self.armed and not self.in_air:
+            self._launch(t_s)
+        return mavlink.MAV_RESULT_ACCEPTED, [self._heartbeat()] if changed else []
+
+    def arm(self, t_s: float) -> None:
+        """Arm; only TAKEOFF mode launches (in MANUAL the throttle is the pilot's)."""
+        if self.armed:
+            return
+        self.armed = True
+        if self.mode == TAKEOFF:
+            self._launch(t_s)
+
+    def _launch(self, t_s: float) -> None:
+        self._air_altitude_m = self.config.altitude_m
+        start = self.config.start
+        self.state = FixedWingState(
+            self.state.east_m, self.state.north_m, start.course_rad, start.speed_m_s
+        )
+        self.in_air = True
+        assert isinstance(self.mode, ArduPlaneMode), self.mode
+        self.command = self._mode_command(self.mode)
+
+    # ---- incoming ----------------------------------------------------------------------------
+
+    def handle(self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float) -> list[Outgoing]:
+        msg_id = msg.get_msgId()
+        if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            return self._on_gcs_heartbeat(msg, t_s, wall_s)
+        if msg_id in (
+            mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED,
+            mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+            mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+            mavlink.MAVLINK_MSG_ID_PARAM_SET,
+        ):
+            return []  # no offboard setpoints (only LOCAL_OFFSET_NED altitude in GUIDED); no params
+        return super().handle(msg, t_s, wall_s)
+
+    def _on_gcs_heartbeat(
+        self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
+    ) -> list[Outgoing]:
+        """Only the GCS of SYSID_MYGCS counts (GCS_MAVLINK::handle_heartbeat)."""
+        if msg.get_srcSystem() != self._sim.gcs_system_id:
+            return []
+        self._gcs_seen_t_s, self._gcs_seen_wall_s = t_s, wall_s
+        if not self.gcs_failsafe_active:
+            return []
+        self.gcs_failsafe_active = False  # the mode is not changed back (failsafe_long_off_event)
+        text = f"Failsafe. Long event off: reason={MODE_REASON_GCS_FAILSAFE}"
+        log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
+        return [self._statustext(mavlink.MAV_SEVERITY_WARNING, text)]
+
+    def _run_command(
+        self, command: int, p: tuple[float, ...], t_s: float, wall_s: float, frame: int | None
+    ) -> tuple[int, list[Outgoing]]:
+        failed, accepted = mavlink.MAV_RESULT_FAILED, mavlink.MAV_RESULT_ACCEPTED
+        if command in (
+            MAV_CMD_GUIDED_CHANGE_HEADING,
+            MAV_CMD_GUIDED_CHANGE_SPEED,
+            MAV_CMD_GUIDED_CHANGE_ALTITUDE,
+        ):
+            if frame is None:  # handled in handle_command_int_packet only (see docs)
+                return mavlink.MAV_RESULT_UNSUPPORTED, []
+            return self._guided_slew(command, p, frame), []
+        if command == mavlink.MAV_CMD_DO_SET_MODE:
+            if not _as_int(p[0]) & _CUSTOM:
+                return mavlink.MAV_RESULT_DENIED, []
+            return self._change_mode(_as_int(p[1], -1), t_s)
+        if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] >= 0.5:
+                was = self.armed
+                self.arm(t_s)
+                return accepted, [self._heartbeat()] if not was else []
+            if self.in_air and _as_int(p[1]) != 21196:
+                return failed, []  # disarming in flight needs the force value
+            return super()._run_command(command, p, t_s, wall_s, frame)
+        if command == mavlink.MAV_CMD_NAV_TAKEOFF:
+            return failed, []  # handle_command_MAV_CMD_NAV_TAKEOFF: only a QuadPlane takes off so
+        if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return self._change_mode(RTL.number, t_s)
+        if command == mavlink.MAV_CMD_NAV_LOITER_UNLIM:
+            return self._change_mode(LOITER.number, t_s)
+        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            if self.mode.custom_mode not in _GUIDED_LIKE | {AUTO.number}:
+                return failed, []
+            if not (math.isfinite(p[1]) and p[1] > 0.0):
+                return failed, []
+            self._guided_speed_m_s = self.config.limits.clamp_speed(p[1])
+            return accepted, []
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._reposition_guided(p, t_s)
+        if command in (
+            mavlink.MAV_CMD_REQUEST_MESSAGE,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            mavlink.MAV_CMD_GET_HOME_POSITION,
+            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+        ):
+            return super()._run_command(command, p, t_s, wall_s, frame)
+        return mavlink.MAV_RESULT_UNSUPPORTED, []
+
+    def _guided_slew(self, command: int, p: tuple[float, ...], frame: int) -> int:
+        """handle_command_int_guided_slew_commands: FAILED outside GUIDED, DENIED for bad values."""
+        if self.mode != GUIDED:
+            return int(mavlink.MAV_RESULT_FAILED)
+        denied = int(mavlink.MAV_RESULT_DENIED)
+        if command == MAV_CMD_GUIDED_CHANGE_HEADING:
+            kind, heading_deg, accel = _as_int(p[0], -1), p[1], p[2]
+            if not (math.isfinite(heading_deg) and 0.0 <= heading_deg < 360.0):
+                return denied
+            if kind == HEADING_TYPE_DEFAULT:
+                self._guided_course_rad = None
+                return int(mavlink.MAV_RESULT_ACCEPTED)
+            if kind != HEADING_TYPE_COURSE_OVER_GROUND:
+                return denied  # HEADING_TYPE_HEADING is ArduPlane's too, not imitated here
+            self._guided_course_rad = wrap_pi(math.radians(heading_deg))
+            accel = accel if math.isfinite(accel) else 0.0
+            self._guided_lateral_accel_m_s2 = max(accel, MIN_LATERAL_ACCEL_M_S2)
+            return int(mavlink.MAV_RESULT_ACCEPTED)
+        if command == MAV_CMD_GUIDED_CHANGE_SPEED:
+            if _as_int(p[0], -1) != SPEED_TYPE_AIRSPEED:
+                return denied
+            speed, accel = p[1], p[2]
+            limits = self.config.limits
+            if not (math.isfinite(speed) and limits.min_speed_m_s <= speed <= limits.max_speed_m_s):
+                return int(mavlink.MAV_RESULT_FAILED)  # outside AIRSPEED_MIN..AIRSPEED_MAX
+            self._guided_speed_m_s = speed
+            accel = abs(accel) if math.isfinite(accel) else 0.0
+            self._guided_accel_m_s2 = math.inf if accel == 0.0 else accel
+            return int(mavlink.MAV_RESULT_ACCEPTED)
+        altitude, rate = p[6], p[2]
+        if not math.isfinite(altitude) or altitude in (0.0, -1.0):
+            return denied  # "disallow default value of -1 and dangerous value of zero"
+        if frame in _ALT_FRAMES_RELATIVE:
+            self._guided_altitude_m = altitude
+        elif frame in _ALT_FRAMES_ABSOLUTE:
+            self._guided_altitude_m = altitude - self._sim.origin_alt_m
+        else:
+            return denied
+        rate = abs(rate) if math.isfinite(rate) else 0.0
+        self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S if rate == 0.0 else rate
+        return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _reposition_guided(self, p: tuple[float, ...], t_s: float) -> tuple[int, list[Outgoing]]:
+        """DO_REPOSITION: GUIDED, loitering at the point (if asked to change mode, or in GUIDED)."""
+        lat, lon = p[4], p[5]
+        if not (math.isfinite(lat) and math.isfinite(lon) and -90 <= lat <= 90):
+            return mavlink.MAV_RESULT_DENIED, []
+        if not (_as_int(p[1]) & 1 or self.mode == GUIDED):  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+            return mavlink.MAV_RESULT_FAILED, []
+        result, out = self._change_mode(GUIDED.number, t_s)
+        if result != mavlink.MAV_RESULT_ACCEPTED or not self.in_air:
+            return result, out
+        self._guided_course_rad = None
+        east, north, _ = self._geodesy.to_local(lat, lon, self._sim.origin_alt_m)
+        self.command = LoiterCommand(
+            east, north, self.loiter_radius_m, self.config.loiter_clockwise, self.cruise_speed_m_s
+        )
+        return result, out
+
+    # ---- flight ------------------------------------------------------------------------------
+
+    def _mode_events(self, t_s: float, wall_s: float) -> list[Outgoing]:
+        """The GCS failsafe (check_long_failsafe with FS_GCS_ENABL = 1)."""
+        seen = self._gcs_seen_t_s
+        if (
+            self.gcs_failsafe == "off"
+            or self.gcs_failsafe_active
+            or seen is None  # "gcs_last_seen_ms != 0": never before a first heartbeat
+            or t_s - seen <= self._sim.gcs_failsafe_timeout_s
+            or wall_s - self._gcs_seen_wall_s <= GCS_FAILSAFE_MIN_WALL_S
+        ):
+            return []
+        self.gcs_failsafe_active = True
+        text = f"Failsafe. Long event on: type={FAILSAFE_GCS}/reason={MODE_REASON_GCS_FAILSAFE}"
+        log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
+        out = [self._statustext(mavlink.MAV_SEVERITY_WARNING, text)]
+        number = self.mode.custom_mode
+        continues = self.gcs_failsafe == "continue" and number in _FAILSAFE_CONTINUES
+        if not continues and self.mode not in (RTL, TAKEOFF):
+            self._set_mode(RTL, t_s)
+        out.append(self._heartbeat())  # system status CRITICAL, and the mode
+        self._next_due[mavlink.MAVLINK_MSG_ID_HEARTBEAT] = t_s + 1.0
+        return out
+
+    def _fly(self, dt_s: float) -> None:
+        limits = self.config.limits
+        command = self.command or self._hold_here()
+        if self.mode == GUIDED:
+            command = self._guided_command(command)
+        course, speed = guide(self.state, command, limits.course_gain_per_s)
+        if isinstance(command, CourseCommand):
+            course = heading_for_ground_course(
+                course, self.state.speed_m_s, self.wind_east_m_s, self.wind_north_m_s
+            )
+            speed_now = max(self.state.speed_m_s, limits.min_speed_m_s)
+            rate = min(limits.max_course_rate_rad_s, command.max_lateral_accel_m_s2 / speed_now)
+            limits = replace(limits, max_course_rate_rad_s=rate)
+        if self.mode == GUIDED and self._guided_speed_m_s is not None:
+            limits = replace(
+                limits, max_accel_m_s2=min(limits.max_accel_m_s2, self._guided_accel_m_s2)
+            )
+        self.state = step(
+            self.state, course, speed, limits, dt_s, self.wind_east_m_s, self.wind_north_m_s
+        )
+        target = self._guided_altitude_m if self.mode == GUIDED else None
+        if target is not None:
+            climb = min(self._guided_climb_rate_m_s, MAX_CLIMB_RATE_M_S) * dt_s
+            error = target - self._air_altitude_m
+            self._air_altitude_m += max(-climb, min(climb, error))
+
+    def _guided_command(self, command: Command) -> Command:
+        """GUIDED: the commanded course, else the loiter it entered with, at the guided speed."""
+        speed = self._guided_speed_m_s or self.cruise_speed_m_s
+        if self._guided_course_rad is not None:
+            return CourseCommand(self._guided_course_rad, speed, self._guided_lateral_accel_m_s2)
+        if isinstance(command, LoiterCommand):
+            return replace(command, speed_m_s=speed)
+        return command
+
+    # ---- outgoing ----------------------------------------------------------------------------
+
+    def _heartbeat_message(self) -> mavlink.MAVLink_message:
+        assert isinstance(self.mode, ArduPlaneMode), self.mode
+        return heartbeat(self.mode, self.armed, self.in_air, self.gcs_failsafe_active)
+
+    def _autopilot_version(self) -> Outgoing:
+        return AUTOPILOT_COMPONENT, mavlink.MAVLink_autopilot_version_message(
+            ARDUPILOT_CAPABILITIES, ARDUPLANE_VERSION, 0, 0, 0,
+            [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x4150_0000_0000_0000 + self.system_id,
+        )  # fmt: skip
+
+
+def heartbeat(
+    mode: ArduPlaneMode, armed: bool, flying: bool, failsafe: bool
+) -> mavlink.MAVLink_message:
+    """ArduPlane's HEARTBEAT: fixed wing, ArduPilotMega, base_mode as GCS_MAVLINK_Plane builds
+    it (with the default stick mixing), custom_mode = the mode number, CRITICAL in failsafe."""
+    if mode == MANUAL:
+        base = _MANUAL_INPUT
+    elif mode.number in (2, 5, 6, 7, 8):  # STABILIZE, FBWA, FBWB, CRUISE, AUTOTUNE
+        base = _STABILIZE
+    elif mode.number in (3, 4):  # TRAINING, ACRO
+        base = _MANUAL_INPUT
+    else:  # AUTO, RTL, LOITER, THERMAL, AVOID_ADSB, GUIDED, CIRCLE, TAKEOFF
+        base = _GUIDED_FLAG | _STABILIZE
+    if mode != MANUAL:
+        base |= _STABILIZE
+    base |= _MANUAL_INPUT | _CUSTOM | (_ARMED if armed else 0)
+    if failsafe:
+        status = mavlink.MAV_STATE_CRITICAL
+    else:
+        status = mavlink.MAV_STATE_ACTIVE if flying else mavlink.MAV_STATE_STANDBY
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_FIXED_WING,
+        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base,
+        mode.number,
+        status,
+        3,
+    )
+
+
+def _as_int(value: float, default: int = 0) -> int:
+    return round(value) if math.isfinite(value) else default

@@ -1,0 +1,337 @@
+"""The simulator's ArduPlane personality: its command handling (no sockets), and the app's
+ArduPlane adapter flying it end to end through MAVSDK over real UDP."""
+
+import asyncio
+import math
+import socket
+from contextlib import aclosing
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from app.adapters.vehicle.autopilots import SetpointLimits
+from app.adapters.vehicle.link import CourseSpeedCommand, LeftOffboard, OffboardLostError
+from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.core.frames import wrap_pi
+from app.errors import LinkError
+from sitl.arduplane import (
+    GUIDED,
+    MAV_CMD_GUIDED_CHANGE_ALTITUDE,
+    MAV_CMD_GUIDED_CHANGE_HEADING,
+    MAV_CMD_GUIDED_CHANGE_SPEED,
+    ArduPlaneVehicle,
+    heading_for_ground_course,
+)
+from sitl.camera import TrackingCamera
+from sitl.config import SimConfig, default_vehicles
+from sitl.geodesy import Geodesy
+from tests.sitl_fixtures import running_sim, sim_config
+from tests.test_vehicle_link_sim import fly, next_event, origin_of, urls_of
+
+SPEEDUP = 8.0
+LIMITS = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=24.0, max_course_rate_rad_s=0.2)
+MAVSDK_GCS_ID = 245  # MAVSDK's ground-station system id (ArduPilot's SYSID_MYGCS default: 255)
+ACCEPTED, DENIED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
+FAILED, UNSUPPORTED = mavlink.MAV_RESULT_FAILED, mavlink.MAV_RESULT_UNSUPPORTED
+REL_ALT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+
+
+# ---- the personality without sockets ---------------------------------------------------------
+
+
+def plane(**overrides: object) -> ArduPlaneVehicle:
+    sim = SimConfig(vehicles=default_vehicles(1), autopilot="arduplane", **overrides)  # type: ignore[arg-type]
+    camera = TrackingCamera(sim.camera, np.random.default_rng(0))
+    geodesy = Geodesy(sim.origin_lat_deg, sim.origin_lon_deg, sim.origin_alt_m)
+    return ArduPlaneVehicle(0, sim.vehicles[0], sim, camera, geodesy)
+
+
+def wire(msg: mavlink.MAVLink_message, src: int = MAVSDK_GCS_ID) -> mavlink.MAVLink_message:
+    """The message as the vehicle receives it (packed by system ``src``, decoded)."""
+    data = msg.pack(mavlink.MAVLink(None, src, 190))
+    decoded = mavlink.MAVLink(None, 1, 1).parse_buffer(data)
+    assert decoded is not None
+    return decoded[0]
+
+
+def ack_of(out: list[tuple[int, mavlink.MAVLink_message]], command: int) -> int:
+    (result,) = [m.result for _, m in out if m.get_type() == "COMMAND_ACK" and m.command == command]
+    return int(result)
+
+
+def command_int(
+    v: ArduPlaneVehicle, command: int, *params: float, frame: int = 0, z: float = 0.0
+) -> int:
+    p = [*params, *([0.0] * (4 - len(params)))]
+    msg = mavlink.MAVLink_command_int_message(1, 1, frame, command, 0, 0, *p, 0, 0, z)
+    return ack_of(v.handle(wire(msg), 0.0, 0.0), command)
+
+
+def command_long(v: ArduPlaneVehicle, command: int, *params: float) -> int:
+    p = [*params, *([0.0] * (7 - len(params)))]
+    msg = mavlink.MAVLink_command_long_message(1, 1, command, 0, *p)
+    return ack_of(v.handle(wire(msg), 0.0, 0.0), command)
+
+
+def heartbeat_of(v: ArduPlaneVehicle) -> mavlink.MAVLink_message:
+    (msg,) = [
+        m for _, m in v.telemetry(1000.0, lambda: (0.0, 0.0, 0.0)) if m.get_type() == "HEARTBEAT"
+    ]
+    return msg
+
+
+def flying(v: ArduPlaneVehicle) -> bool:
+    return v.in_air
+
+
+def targets(v: ArduPlaneVehicle) -> tuple[float | None, float | None, float | None]:
+    return v.guided_targets
+
+
+def guided_in_the_air() -> ArduPlaneVehicle:
+    v = plane()
+    assert command_long(v, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == ACCEPTED
+    assert not flying(v)  # armed in MANUAL: the throttle is the pilot's
+    assert command_long(v, mavlink.MAV_CMD_DO_SET_MODE, 1, 13) == ACCEPTED  # TAKEOFF launches
+    assert flying(v)
+    assert command_long(v, mavlink.MAV_CMD_DO_SET_MODE, 1, 15) == ACCEPTED
+    assert v.mode == GUIDED
+    return v
+
+
+def test_heartbeat_is_arduplanes():
+    v = plane()
+    hb = heartbeat_of(v)
+    assert (hb.type, hb.autopilot) == (
+        mavlink.MAV_TYPE_FIXED_WING,
+        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+    )
+    assert (hb.custom_mode, hb.system_status) == (0, mavlink.MAV_STATE_STANDBY)  # MANUAL, ground
+    assert hb.base_mode == mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | 1  # + custom mode
+    v = guided_in_the_air()
+    hb = heartbeat_of(v)
+    assert (hb.custom_mode, hb.system_status) == (15, mavlink.MAV_STATE_ACTIVE)
+    assert hb.base_mode == 1 | 8 | 16 | 64 | 128  # custom, guided, stabilize, stick mixing, armed
+
+
+def test_command_answers_follow_arduplane():
+    v = plane()
+    # guided slew commands outside GUIDED: MAV_RESULT_FAILED ("only valid in guided mode")
+    assert command_int(v, MAV_CMD_GUIDED_CHANGE_HEADING, 0, 90.0, 3.0) == FAILED
+    # only a QuadPlane takes off with NAV_TAKEOFF (MAVSDK's Action.takeoff sends it)
+    assert command_long(v, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 30.0) == FAILED
+    # a mode ArduPlane has not, or a QuadPlane mode: FAILED; no custom-mode flag: DENIED
+    assert command_long(v, mavlink.MAV_CMD_DO_SET_MODE, 1, 18) == FAILED  # QHOVER
+    assert command_long(v, mavlink.MAV_CMD_DO_SET_MODE, 1, 9) == FAILED
+    assert command_long(v, mavlink.MAV_CMD_DO_SET_MODE, 0, 15) == DENIED
+    v = guided_in_the_air()
+    heading, speed, altitude = (
+        MAV_CMD_GUIDED_CHANGE_HEADING,
+        MAV_CMD_GUIDED_CHANGE_SPEED,
+        MAV_CMD_GUIDED_CHANGE_ALTITUDE,
+    )
+    assert command_int(v, heading, 0, 360.0, 3.0) == DENIED  # outside [0, 360)
+    assert command_int(v, heading, 7, 90.0, 3.0) == DENIED  # unknown heading type
+    assert command_long(v, heading, 0, 90.0, 3.0) == UNSUPPORTED  # COMMAND_INT only
+    assert command_int(v, speed, 1, 15.0, 2.0) == DENIED  # ground speed: not supported
+    assert command_int(v, speed, 0, 30.0, 2.0) == FAILED  # above AIRSPEED_MAX (24)
+    assert command_int(v, altitude, 0, 0, 3.0, frame=REL_ALT, z=0.0) == DENIED
+    assert command_int(v, altitude, 0, 0, 3.0, frame=mavlink.MAV_FRAME_LOCAL_NED, z=80.0) == DENIED
+    assert targets(v) == (None, None, None)
+    assert command_int(v, heading, 0, 270.0, 3.0) == ACCEPTED
+    assert command_int(v, speed, 0, 15.0, 2.0) == ACCEPTED
+    assert command_int(v, altitude, 0, 0, 3.0, frame=REL_ALT, z=120.0) == ACCEPTED
+    course, speed_m_s, altitude_m = targets(v)
+    assert course == pytest.approx(-math.pi / 2)
+    assert (speed_m_s, altitude_m) == (15.0, 120.0)
+    # leaving GUIDED forgets the guided targets (Mode::enter)
+    assert command_long(v, mavlink.MAV_CMD_NAV_LOITER_UNLIM) == ACCEPTED
+    assert (v.mode.name, targets(v)) == ("loiter", (None, None, None))
+
+
+def test_guided_turn_is_limited_by_the_lateral_acceleration_and_flies_the_targets():
+    v = guided_in_the_air()
+    speed = v.state.speed_m_s
+    assert speed == pytest.approx(18.0)
+    # turn about at 1.8 m/s^2: at 18 m/s no faster than 0.1 rad/s (the vehicle could do 0.2)
+    assert command_int(v, MAV_CMD_GUIDED_CHANGE_HEADING, 0, 180.0, 1.8) == ACCEPTED
+    assert (
+        command_int(v, MAV_CMD_GUIDED_CHANGE_ALTITUDE, 0, 0, 2.0, frame=REL_ALT, z=110.0)
+        == ACCEPTED
+    )
+    rates, dt = [], 0.02
+    for k in range(2500):
+        v.advance(dt, k * dt, k * dt, 0.0, 0.0)
+        rates.append(abs(v.state.course_rate_rad_s))
+    assert max(rates) <= 1.8 / 18.0 + 1e-9
+    assert max(rates) == pytest.approx(0.1)  # and it used all of it
+    assert v.state.course_rad == pytest.approx(
+        -math.pi, abs=1e-3
+    ) or v.state.course_rad == pytest.approx(math.pi, abs=1e-3)
+    assert v.altitude_m == pytest.approx(110.0)  # 10 m at 2 m/s: reached within the 50 s
+    # param3 0 is taken as 0.05 m/s^2: a turn of a few thousandths of a rad/s
+    assert command_int(v, MAV_CMD_GUIDED_CHANGE_HEADING, 0, 90.0, 0.0) == ACCEPTED
+    v.advance(dt, 60.0, 60.0, 0.0, 0.0)
+    assert abs(v.state.course_rate_rad_s) == pytest.approx(0.05 / 18.0)
+
+
+def test_course_over_ground_is_held_in_a_cross_wind():
+    # closed form: 5 m/s from the west (blowing east), course north at 15 m/s airspeed
+    heading = heading_for_ground_course(0.0, 15.0, 5.0, 0.0)
+    assert heading == pytest.approx(-math.asin(5.0 / 15.0))
+    ground_east = 15.0 * math.sin(heading) + 5.0
+    assert ground_east == pytest.approx(0.0, abs=1e-12)
+    assert heading_for_ground_course(0.0, 4.0, 5.0, 0.0) == pytest.approx(-math.pi / 2)
+    assert heading_for_ground_course(1.0, 0.0, 5.0, 0.0) == 1.0
+
+
+def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
+    def hb(src: int) -> mavlink.MAVLink_message:
+        return wire(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), src)
+
+    v = plane(gcs_failsafe="return", gcs_system_id=255)
+    v.handle(hb(MAVSDK_GCS_ID), 0.0, 0.0)  # MAVSDK's id: not the GCS this ArduPlane knows
+    assert v.advance(0.02, 60.0, 60.0, 0.0, 0.0) == []
+    assert v.gcs_failsafe_active is False
+    v = guided_in_the_air()
+    v.gcs_failsafe = "continue"
+    v.handle(hb(255), 10.0, 10.0)
+    assert v.advance(0.02, 14.0, 14.0, 0.0, 0.0) == []  # FS_LONG_TIMEOUT 5 s not yet over
+    out = v.advance(0.02, 15.1, 15.1, 0.0, 0.0)
+    texts = [m.text for _, m in out if m.get_type() == "STATUSTEXT"]
+    assert texts == ["Failsafe. Long event on: type=3/reason=5"]
+    assert v.mode == GUIDED  # FS_LONG_ACTN 0: GUIDED continues
+    assert heartbeat_of(v).system_status == mavlink.MAV_STATE_CRITICAL
+    out = v.handle(hb(255), 16.0, 16.0)
+    assert [m.text for _, m in out] == ["Failsafe. Long event off: reason=5"]
+    assert v.gcs_failsafe_active is False
+
+
+# ---- the app's ArduPlane adapter over MAVSDK and UDP -----------------------------------------
+
+
+async def test_arduplane_adapter_is_chosen_takes_off_flies_courses_and_stops_in_loiter():
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
+    async with asyncio.timeout(40.0), running_sim(config) as sim:
+        async with (
+            MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+            hub.link(1, LinkConfig(LIMITS)) as link,
+        ):
+            assert link.autopilot_name == "arduplane"  # chosen from the heartbeat
+            ground = await link.wait_ready(10.0)
+            assert (ground.flight_mode, ground.armed, ground.in_air) == ("MANUAL", False, False)
+            await link.arm()
+            await link.take_off(10.0)  # TAKEOFF mode (ArduPlane refuses NAV_TAKEOFF)
+            assert sim.truth().vehicles[0].mode == "takeoff"
+            east = CourseSpeedCommand(math.pi / 2, 16.0, altitude_m=110.0)
+            await link.start_offboard(east)
+            assert link.flight_mode == "GUIDED"
+            await fly(link, east, 20.0)
+            frame = link.latest
+            assert frame is not None
+            assert abs(wrap_pi(frame.course_rad - math.pi / 2)) < 0.02
+            assert frame.ground_speed_m_s == pytest.approx(16.0, abs=0.1)
+            assert frame.relative_altitude_m == pytest.approx(110.0, abs=0.01)
+            # an about-turn: the vehicle never turns faster than 0.2 rad/s
+            rates: list[float] = []
+
+            async def watch() -> None:
+                async for truth in sim.truth_samples(0.1):
+                    rates.append(abs(truth.vehicles[0].state.course_rate_rad_s))
+
+            watcher = asyncio.create_task(watch(), name="watch-rates")
+            west = CourseSpeedCommand(-math.pi / 2, 20.0)
+            await fly(link, west, 25.0)
+            watcher.cancel()
+            frame = link.latest
+            assert frame is not None
+            assert abs(wrap_pi(frame.course_rad + math.pi / 2)) < 0.02
+            assert frame.ground_speed_m_s == pytest.approx(20.0, abs=0.1)
+            assert max(rates) <= 0.2 + 1e-9
+            assert max(rates) > 0.15
+        # leaving the link stops it: LOITER
+        assert sim.truth().vehicles[0].mode == "loiter"
+
+
+async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_result():
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
+    wide = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=30.0, max_course_rate_rad_s=0.2)
+    async with asyncio.timeout(40.0), running_sim(config) as sim:
+        vehicle = sim.vehicles[0]
+        assert isinstance(vehicle, ArduPlaneVehicle)
+        async with (
+            MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+            hub.link(1, LinkConfig(wide)) as link,
+        ):
+            await link.wait_ready(10.0)
+            await link.arm()
+            await link.take_off(10.0)
+            vehicle.gcs_blocked_modes = frozenset({15})  # FLTMODE_GCSBLOCK: no GUIDED from a GCS
+            with pytest.raises(LinkError, match="mode change to GUIDED refused: MAV_RESULT_FAILED"):
+                await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
+            vehicle.gcs_blocked_modes = frozenset()
+            await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
+            # 28 m/s is within the app's limits but above the vehicle's AIRSPEED_MAX (24)
+            with pytest.raises(LinkError, match="GUIDED_CHANGE_SPEED refused: MAV_RESULT_FAILED"):
+                await link.send(CourseSpeedCommand(0.0, 28.0))
+            assert vehicle.guided_targets[1] == 18.0
+
+
+async def test_leaving_guided_by_someone_else_is_reported():
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
+    async with (
+        asyncio.timeout(40.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+        hub.link(1, LinkConfig(LIMITS)) as link,
+        aclosing(link.events()) as events,
+    ):
+        north = CourseSpeedCommand(0.0, 18.0)
+        await link.wait_ready(10.0)
+        await link.arm()
+        await link.take_off(10.0)
+        await link.start_offboard(north)
+        await fly(link, north, 2.0)
+        # a pilot's ground station switches it to RTL
+        endpoint = sim.endpoints[0]
+        other = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        message = mavlink.MAVLink_command_long_message(1, 1, 176, 0, 1, 11, 0, 0, 0, 0, 0)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.sendto(message.pack(other), (endpoint.local_host, endpoint.local_port))
+        left = await next_event(events, LeftOffboard, 5.0)
+        assert isinstance(left, LeftOffboard)
+        assert (left.vehicle_id, left.flight_mode) == (1, "RTL")
+        with pytest.raises(OffboardLostError, match="left GUIDED"):
+            await link.send(north)
+        assert sim.truth().vehicles[0].mode == "rtl"
+
+
+async def test_gcs_failsafe_returns_when_mavsdk_heartbeats_stop():
+    # SYSID_MYGCS set to MAVSDK's 245: with ArduPilot's default 255 the failsafe never arms
+    config = sim_config(
+        1, speedup=SPEEDUP, autopilot="arduplane", gcs_failsafe="return", gcs_system_id=245
+    )
+    link_config = LinkConfig(LIMITS, link_timeout_s=1.0)
+    async with (
+        asyncio.timeout(40.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+        hub.link(1, link_config) as link,
+        aclosing(link.events()) as events,
+    ):
+        east = CourseSpeedCommand(math.pi / 2, 16.0)
+        await link.wait_ready(10.0)
+        await link.arm()
+        await link.take_off(10.0)
+        await link.start_offboard(east)
+        # MAVSDK heartbeats at 1 Hz wall: fly 2 s wall first (no failsafe before one is seen)
+        await fly(link, east, 2.0 * SPEEDUP)
+        sim.set_link(0, False)
+        async with asyncio.timeout(10.0):
+            while sim.truth().vehicles[0].mode != "rtl":
+                await sim.wait_until(sim.time_s + 0.5)
+        sim.set_link(0, True)
+        left = await next_event(events, LeftOffboard, 5.0)
+        assert isinstance(left, LeftOffboard)
+        assert left.flight_mode == "RTL"
