@@ -114,6 +114,10 @@ class SitlScenario(StrictModel):
     offboard_timeout_s: Positive = 1.0
     offboard_timeout_min_wall_s: NonNegative = 0.25
     failsafe_action: Literal["hold", "return"] = "hold"
+    autopilot: Literal["px4", "arduplane"] = "px4"
+    gcs_failsafe: Literal["off", "continue", "return"] = "off"
+    gcs_failsafe_timeout_s: Positive = 5.0
+    gcs_system_id: Annotated[int, Field(ge=1, le=255)] = 255
 
     def build(
         self,
@@ -121,6 +125,7 @@ class SitlScenario(StrictModel):
         base_port: int | None = None,
         speedup: float | None = None,
         seed: int | None = None,
+        autopilot: Literal["px4", "arduplane"] | None = None,
     ) -> SimConfig:
         """The simulator config, with command-line overrides; ConfigError if they do not fit."""
         vehicles = self._vehicles(count)
@@ -142,6 +147,10 @@ class SitlScenario(StrictModel):
                 offboard_timeout_s=self.offboard_timeout_s,
                 offboard_timeout_min_wall_s=self.offboard_timeout_min_wall_s,
                 failsafe_action=self.failsafe_action,
+                autopilot=self.autopilot if autopilot is None else autopilot,
+                gcs_failsafe=self.gcs_failsafe,
+                gcs_failsafe_timeout_s=self.gcs_failsafe_timeout_s,
+                gcs_system_id=self.gcs_system_id,
                 camera=self.camera.build(),
                 wind=self.wind.build(),
             )

@@ -174,3 +174,20 @@ def test_hosts_from_the_command_line(capsys):
     )
     assert code == 0
     assert f"sends to 127.0.0.2:{base} from 127.0.0.1:" in capsys.readouterr().out
+
+
+def test_the_arduplane_personality_is_chosen_by_option_or_scenario(tmp_path, capsys):
+    scenario = tmp_path / "ardu.toml"
+    scenario.write_text('autopilot = "arduplane"\ngcs_failsafe = "return"\ngcs_system_id = 245\n')
+    built = load_config(scenario, SitlScenario).build()
+    assert (built.autopilot, built.gcs_failsafe, built.gcs_system_id) == (
+        "arduplane",
+        "return",
+        245,
+    )
+    assert SitlScenario().build().autopilot == "px4"  # the default is unchanged
+    assert SitlScenario().build(autopilot="arduplane").autopilot == "arduplane"
+    base = find_free_udp_base_port(1)
+    argv = ["sitl", "--vehicles", "1", "--base-port", str(base), "--speedup", "50"]
+    assert main([*argv, "--autopilot", "arduplane", "--duration", "0.5"]) == 0
+    assert "autopilot arduplane" in capsys.readouterr().out

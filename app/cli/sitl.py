@@ -21,7 +21,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         "sitl",
         help="run the built-in MAVLink simulator (vehicles, target, camera) alone",
         description=(
-            "Run N simulated PX4-like fixed-wing vehicles that MAVSDK or pymavlink clients fly "
+            "Run N simulated PX4-like (or ArduPlane-like) fixed-wing vehicles that MAVSDK or "
+            "pymavlink clients fly "
             "over UDP. Vehicle i (system id i+1) sends to HOST:BASE_PORT+i; a client listens "
             "there (MAVSDK: udpin://0.0.0.0:BASE_PORT+i). Runs until Ctrl-C."
         ),
@@ -44,6 +45,11 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         "--bind-host",
         metavar="HOST",
         help="address the vehicle sockets bind (default 127.0.0.1; 0.0.0.0 for other machines)",
+    )
+    parser.add_argument(
+        "--autopilot",
+        choices=("px4", "arduplane"),
+        help="which autopilot the vehicles imitate (default px4; see docs/simulator.md)",
     )
     parser.add_argument(
         "--duration",
@@ -73,7 +79,11 @@ def build_sim_config(args: argparse.Namespace) -> SimConfig:
         }
     )
     return scenario.model_copy(update={"network": network}).build(
-        count=args.vehicles, base_port=args.base_port, speedup=args.speedup, seed=args.seed
+        count=args.vehicles,
+        base_port=args.base_port,
+        speedup=args.speedup,
+        seed=args.seed,
+        autopilot=args.autopilot,
     )
 
 
@@ -124,7 +134,8 @@ def _print_endpoints(sim: SimulatorServer, out: TextIO) -> None:
     config = sim.config
     print(
         f"standoff sitl: {len(sim.endpoints)} vehicles, speed-up {config.speedup:g}x, "
-        f"seed {config.seed}, origin {config.origin_lat_deg:.6f}, {config.origin_lon_deg:.6f}",
+        f"seed {config.seed}, origin {config.origin_lat_deg:.6f}, {config.origin_lon_deg:.6f}, "
+        f"autopilot {config.autopilot}",
         file=out,
     )
     for endpoint in sim.endpoints:
