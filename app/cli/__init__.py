@@ -44,6 +44,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _reasons(group: BaseExceptionGroup[BaseException]) -> list[str] | None:
+    """The messages of every exception in a (nested) group if all are ``StandoffError``s."""
+    reasons: list[str] = []
+    for exc in group.exceptions:
+        if isinstance(exc, BaseExceptionGroup):
+            inner = _reasons(exc)
+            if inner is None:
+                return None
+            reasons += inner
+        elif isinstance(exc, StandoffError):
+            reasons.append(str(exc))
+        else:
+            return None
+    return reasons
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -56,6 +72,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return handler(args)
     except StandoffError as exc:
         print(f"standoff {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BaseExceptionGroup as group:
+        # a task group raises what its tasks raised, grouped: when every one is ours, each has
+        # a reason worth one line; anything else is a bug and keeps its traceback
+        reasons = _reasons(group)
+        if reasons is None:
+            raise
+        for reason in dict.fromkeys(reasons):
+            print(f"standoff {args.command}: error: {reason}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"standoff {args.command}: interrupted", file=sys.stderr)

@@ -20,12 +20,20 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from app.adapters.bus import Bus, InProcessBroker, LinkState, Will, open_bus, topics
+from app.adapters.bus import (
+    BrokerUrl,
+    Bus,
+    InProcessBroker,
+    LinkState,
+    Will,
+    open_bus,
+    topics,
+)
 from app.adapters.eventlog import EventLog
 from app.adapters.tlog import TlogSample, TlogWriter
 from app.adapters.vehicle.autopilots import SetpointLimits
 from app.adapters.vehicle.link import CourseSpeedCommand, GeodeticOrigin, VehicleLink
-from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub, validate_url
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams
 from app.core.ground import GroundParams
 from app.core.mission_agent import MissionAgentParams
@@ -317,6 +325,11 @@ async def run_mission(
     if builtin:
         autopilot = autopilot or "velocity"  # the built-in simulator takes velocity setpoints
     broker_url = broker_url if broker_url is not None else cfg.bus
+    # a bad URL is a ConfigError here, before anything is started or written
+    for url in urls:
+        validate_url(url)
+    if broker_url is not None:
+        BrokerUrl.parse(broker_url)
     ground: GroundStation | None = None
     links: dict[int, VehicleLink] = {}
     interrupted = False
