@@ -142,6 +142,8 @@ def figures(summary: dict[str, Any]) -> dict[str, float | None]:
         out[f"{key} RMS distance (m)"] = team.get("distance_error_m", {}).get("rms")
         out[f"{key} RMS spacing (deg)"] = team.get("spacing_error_deg", {}).get("rms")
     out["wall time (s)"] = summary.get("wall_s")
+    # the ground dropping a vehicle it still hears (its statuses late) re-spaces the others
+    out["vehicles left the formation"] = float(summary.get("events", {}).get("vehicle_left", 0))
     return out
 
 
