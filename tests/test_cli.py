@@ -1,10 +1,14 @@
+import argparse
 import subprocess
 import sys
 
 import pytest
 
 from app.cli import COMMAND_MODULES, _reasons, main
+from app.cli.fly import with_overrides
+from app.config import load_config
 from app.errors import ConfigError
+from app.mission_config import MissionConfig
 
 
 def test_top_level_help_lists_every_subcommand(capsys):
@@ -56,3 +60,45 @@ def test_grouped_errors_are_reasons_only_when_every_one_is_ours():
     ours = ExceptionGroup("g", [ConfigError("a"), ExceptionGroup("h", [ConfigError("b")])])
     assert _reasons(ours) == ["a", "b"]
     assert _reasons(ExceptionGroup("g", [ConfigError("a"), ValueError("bug")])) is None
+
+
+@pytest.mark.parametrize(
+    ("args", "field"),
+    [
+        (["--vehicles", "0"], "vehicles"),
+        (["--vehicles", "1000"], "vehicles"),
+        (["--speedup", "-1"], "sim.speedup"),
+        (["--speedup", "nan"], "sim.speedup"),
+        (["--seed", "-5"], "sim.seed"),
+        (["--base-port", "70000"], "sim.base_port"),
+    ],
+)
+def test_fly_validates_its_options_like_the_config_file(args, field, tmp_path, capsys):
+    # --vehicles 0 used to fly the config's 3, the others to fail later as "the built-in
+    # simulator did not start: no output"
+    out = tmp_path / "run"
+    assert main(["fly", "--quiet", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith(f"standoff fly: error: command line: {field}: ")
+    assert not out.exists()
+
+
+def test_fly_options_override_the_config_and_keep_the_rest():
+    config = load_config("px4-sitl", MissionConfig)
+    args = argparse.Namespace(speedup=2.0, seed=7, base_port=15000, vehicles=2)
+    got = with_overrides(config, args)
+    assert (got.sim.speedup, got.sim.seed, got.sim.base_port, got.vehicles) == (2.0, 7, 15000, 2)
+    back = got.model_copy(
+        update={
+            "vehicles": config.vehicles,
+            "sim": got.sim.model_copy(
+                update={
+                    "speedup": config.sim.speedup,
+                    "seed": config.sim.seed,
+                    "base_port": config.sim.base_port,
+                }
+            ),
+        }
+    )
+    assert back == config

@@ -10,7 +10,7 @@ from pathlib import Path
 from rich.console import Console
 
 from app.adapters.live_view import LiveView
-from app.config import load_config
+from app.config import load_config, validate_config
 from app.mission_config import MissionConfig
 from app.runtime.mission import build_plan, run_mission
 
@@ -51,21 +51,35 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
     p.set_defaults(handler=run)
 
 
+def with_overrides(config: MissionConfig, args: argparse.Namespace) -> MissionConfig:
+    """The config with the command line's --vehicles, --speedup, --seed and --base-port,
+    validated like the file itself (ConfigError naming the option's field)."""
+    sim = {
+        key: value
+        for key, value in (
+            ("speedup", args.speedup),
+            ("seed", args.seed),
+            ("base_port", args.base_port),
+        )
+        if value is not None
+    }
+    if not sim and args.vehicles is None:
+        return config
+    raw = config.model_dump()
+    raw["sim"].update(sim)
+    if args.vehicles is not None:
+        raw["vehicles"] = args.vehicles
+    return validate_config(raw, MissionConfig, "command line")
+
+
 def default_out_dir(name: str) -> Path:
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{name}-{stamp}"
 
 
 def run(args: argparse.Namespace) -> int:
-    config = load_config(args.config, MissionConfig)
-    overrides: dict[str, object] = {}
-    if args.speedup is not None:
-        overrides["speedup"] = args.speedup
-    if args.seed is not None:
-        overrides["seed"] = args.seed
-    if overrides:
-        config = config.model_copy(update={"sim": config.sim.model_copy(update=overrides)})
-    plan = build_plan(config, args.vehicles)
+    config = with_overrides(load_config(args.config, MissionConfig), args)
+    plan = build_plan(config)
     out = args.out or default_out_dir(config.name)
     console = Console()
     console.print(
