@@ -7,7 +7,9 @@ GCS_MAVLink_Plane.cpp (``base_mode``, ``custom_mode`` = the mode number); DO_SET
 GCS_Common.cpp ``_set_mode_common`` (a mode it cannot enter is MAV_RESULT_FAILED); the
 MAV_CMD_GUIDED_CHANGE_HEADING / _SPEED / _ALTITUDE checks of
 ``handle_command_int_guided_slew_commands``; NAV_TAKEOFF refused unless a QuadPlane; the GCS
-failsafe of ``check_long_failsafe`` / ``failsafe_long_on_event``.
+failsafe of ``check_long_failsafe`` / ``failsafe_long_on_event``, driven by the parameters that
+configure it (SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN, FS_LONG_TIMEOUT), which are read and set
+over MAVLink as ArduPilot's GCS_Param.cpp serves them.
 """
 
 import logging
@@ -22,7 +24,7 @@ from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState, step, wrap_pi
 from sitl.geodesy import Geodesy
 from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
-from sitl.vehicle import AUTOPILOT_COMPONENT, FlightMode, Outgoing, SimVehicle
+from sitl.vehicle import AUTOPILOT_COMPONENT, FlightMode, Outgoing, SimVehicle, param_id_text
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +48,39 @@ TAKEOFF_LOITER_DISTANCE_M: Final = 200.0
 GCS_FAILSAFE_MIN_WALL_S: Final = 2.5
 FAILSAFE_GCS: Final = 3  # failsafe_state in ArduPlane/defines.h
 MODE_REASON_GCS_FAILSAFE: Final = 5  # ModeReason::GCS_FAILSAFE (AP_Vehicle/ModeReason.h)
+
+# The ArduPlane parameters the personality honours (ArduPlane/Parameters.cpp and Parameters.h),
+# in PARAM_REQUEST_LIST order, with the MAV_PARAM_TYPE of the AP_Param each is stored as.
+# ArduPilot sends that type in PARAM_VALUE with the value C-cast to the float field
+# (GCS_MAVLINK::mav_param_type, cast_to_float) and takes PARAM_SET values the same way,
+# whatever param_type the sender gives (AP_Param::set_float).
+PARAM_SYSID_MYGCS: Final = "SYSID_MYGCS"  # AP_Int16, default 255: whose heartbeats count
+PARAM_FS_GCS_ENABL: Final = "FS_GCS_ENABL"  # AP_Int8: 0 off, 1 heartbeat, 2 + REMRSSI, 3 AUTO only
+PARAM_FS_LONG_ACTN: Final = "FS_LONG_ACTN"  # AP_Int8: 0 continue, 1 RTL, 2 glide, 3 parachute, ...
+PARAM_FS_LONG_TIMEOUT: Final = "FS_LONG_TIMEOUT"  # AP_Float, s
+PARAM_TYPES: Final = {
+    PARAM_SYSID_MYGCS: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_FS_GCS_ENABL: mavlink.MAV_PARAM_TYPE_INT8,
+    PARAM_FS_LONG_ACTN: mavlink.MAV_PARAM_TYPE_INT8,
+    PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+}
+_INT_RANGES: Final = {
+    mavlink.MAV_PARAM_TYPE_INT8: (-128, 127),
+    mavlink.MAV_PARAM_TYPE_INT16: (-32768, 32767),
+}
+#: PARAM_VALUE.param_index -1 (65535 on the wire): the answer to a read by name and the
+#: confirmation of a PARAM_SET (GCS::send_parameter_value)
+PARAM_INDEX_NONE: Final = 65535
+# FS_GCS_ENABL values (GCS_FAILSAFE_* in ArduPlane/defines.h)
+GCS_FAILSAFE_HEARTBEAT: Final = 1
+GCS_FAILSAFE_HB_RSSI: Final = 2
+GCS_FAILSAFE_HB_AUTO: Final = 3
+# FS_LONG_ACTN values (FS_ACTION_LONG_* in ArduPlane/defines.h)
+FS_ACTION_LONG_CONTINUE: Final = 0
+FS_ACTION_LONG_RTL: Final = 1
+FS_ACTION_LONG_GLIDE: Final = 2
+FS_ACTION_LONG_PARACHUTE: Final = 3
+FS_ACTION_LONG_AUTO: Final = 4
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,8 +119,10 @@ _OTHER_MODES: Final = {
 #: (9, 16 = INITIALISING, > 25) are refused with MAV_RESULT_FAILED
 _LOITERING: Final = (CIRCLE, AUTO, LOITER)
 _GUIDED_LIKE: Final = {GUIDED.number, 14}  # Mode::is_guided_mode(): GUIDED, AVOID_ADSB
-#: modes in which the GCS failsafe's "continue" continues (failsafe_long_on_event)
-_FAILSAFE_CONTINUES: Final = {AUTO.number, GUIDED.number, LOITER.number, 14, 24}
+#: modes in which failsafe_long_on_event does what FS_LONG_ACTN says only if it is not 0
+#: (continue): AUTO, AVOID_ADSB, GUIDED; every other fixed-wing mode but RTL returns on 0 too
+_FAILSAFE_AUTO_MODES: Final = {AUTO.number, 14, GUIDED.number}
+_FBWA: Final = 5
 
 _ALT_FRAMES_RELATIVE: Final = {
     mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
@@ -110,6 +147,33 @@ ARDUPILOT_CAPABILITIES: Final = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
 )
 ARDUPLANE_VERSION: Final = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reports ArduPlane 4.5.7
+
+
+def long_failsafe_mode(mode_number: int, action: int) -> int | None:
+    """The mode ArduPlane's ``failsafe_long_on_event`` switches to from ``mode_number`` when
+    FS_LONG_ACTN is ``action``; None when it stays (parachute and AUTOLAND are not imitated:
+    the parachute leaves the mode alone, AUTOLAND is taken as its RTL fallback)."""
+    if action == FS_ACTION_LONG_PARACHUTE:
+        return None
+    if mode_number == RTL.number:
+        return AUTO.number if action == FS_ACTION_LONG_AUTO else None
+    if action == FS_ACTION_LONG_GLIDE:
+        return _FBWA
+    if action == FS_ACTION_LONG_AUTO:
+        return AUTO.number
+    if mode_number in _FAILSAFE_AUTO_MODES and action == FS_ACTION_LONG_CONTINUE:
+        return None
+    return RTL.number
+
+
+def param_value_from_wire(kind: int, wire_value: float) -> float:
+    """A PARAM_SET value as AP_Param::set_float stores it: integer types get 0.01 added away
+    from zero, are clamped to their range and truncated."""
+    limits = _INT_RANGES.get(kind)
+    if limits is None:
+        return wire_value
+    nudged = wire_value + (0.01 if wire_value >= 0.0 else -0.01)
+    return float(int(max(limits[0], min(limits[1], nudged))))
 
 
 def mode_by_number(number: int) -> ArduPlaneMode | None:
@@ -144,8 +208,8 @@ class ArduPlaneVehicle(SimVehicle):
     entering TAKEOFF while armed (or arming in TAKEOFF) launches it, as a catapult would, and it
     loiters 200 m ahead at its altitude, staying in TAKEOFF. GUIDED flies, from the moment it
     is entered, a loiter where it is until MAV_CMD_GUIDED_CHANGE_HEADING gives it a course over
-    ground; the guided targets last until the mode changes. It takes no offboard setpoints and
-    has no parameters.
+    ground; the guided targets last until the mode changes. It takes no offboard setpoints.
+    ``params`` holds the four failsafe parameters (``PARAM_TYPES``), read live by the failsafe.
     """
 
     def __init__(
@@ -161,7 +225,18 @@ class ArduPlaneVehicle(SimVehicle):
         self.command = None
         self._air_altitude_m = self.config.altitude_m
         self._reset_guided()
-        self.gcs_failsafe = self._sim.gcs_failsafe
+        failsafe = self._sim.gcs_failsafe
+        self.params: dict[str, float] = {
+            PARAM_SYSID_MYGCS: float(self._sim.gcs_system_id),
+            PARAM_FS_GCS_ENABL: 0.0 if failsafe == "off" else float(GCS_FAILSAFE_HEARTBEAT),
+            PARAM_FS_LONG_ACTN: float(
+                FS_ACTION_LONG_RTL if failsafe == "return" else FS_ACTION_LONG_CONTINUE
+            ),
+            PARAM_FS_LONG_TIMEOUT: self._sim.gcs_failsafe_timeout_s,
+        }
+        #: parameters whose PARAM_SET is refused as ArduPilot refuses one it may not take over
+        #: MAVLink (``allow_set_via_mavlink`` false): "Param write denied" and the old value
+        self.param_write_denied: frozenset[str] = frozenset()
         self.gcs_failsafe_active = False
         self._gcs_seen_t_s: float | None = None
         self._gcs_seen_wall_s = -math.inf
@@ -263,20 +338,63 @@ class ArduPlaneVehicle(SimVehicle):
         msg_id = msg.get_msgId()
         if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
             return self._on_gcs_heartbeat(msg, t_s, wall_s)
+        if msg_id == mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED:
+            return []  # no offboard setpoints (only LOCAL_OFFSET_NED altitude in GUIDED)
         if msg_id in (
-            mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED,
             mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
             mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
             mavlink.MAVLINK_MSG_ID_PARAM_SET,
         ):
-            return []  # no offboard setpoints (only LOCAL_OFFSET_NED altitude in GUIDED); no params
+            if msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            return self._on_param_message(msg)
         return super().handle(msg, t_s, wall_s)
+
+    # ---- parameters (GCS_Param.cpp) ----------------------------------------------------------
+
+    def _on_param_message(self, msg: mavlink.MAVLink_message) -> list[Outgoing]:
+        """PARAM_REQUEST_LIST: every parameter; PARAM_REQUEST_READ: by index, or by name when the
+        index is -1 (answered with index -1); PARAM_SET: the value stored as its type, confirmed
+        with PARAM_VALUE. Unknown names, bad indices and non-finite values get no answer."""
+        msg_id = msg.get_msgId()
+        names = list(PARAM_TYPES)
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
+            return [self._param_value_message(name, names.index(name)) for name in names]
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
+            index = msg.param_index
+            if index != -1:
+                known = 0 <= index < len(names)
+                return [self._param_value_message(names[index], index)] if known else []
+            name = param_id_text(msg.param_id)
+            known = name in PARAM_TYPES
+            return [self._param_value_message(name, PARAM_INDEX_NONE)] if known else []
+        name = param_id_text(msg.param_id)
+        value = float(msg.param_value)
+        if name not in PARAM_TYPES or not math.isfinite(value):
+            return []
+        if name in self.param_write_denied:
+            text = f"Param write denied ({name})"
+            return [
+                self._statustext(mavlink.MAV_SEVERITY_WARNING, text),
+                self._param_value_message(name, PARAM_INDEX_NONE),  # the value in force
+            ]
+        self.params[name] = param_value_from_wire(PARAM_TYPES[name], value)
+        log.info("vehicle %d: %s set to %g", self.system_id, name, self.params[name])
+        return [self._param_value_message(name, PARAM_INDEX_NONE)]
+
+    def _param_value_message(self, name: str, index: int) -> Outgoing:
+        return AUTOPILOT_COMPONENT, mavlink.MAVLink_param_value_message(
+            name.encode("ascii"), self.params[name], PARAM_TYPES[name], len(PARAM_TYPES), index
+        )
+
+    def _param_int(self, name: str) -> int:
+        return int(self.params[name])
 
     def _on_gcs_heartbeat(
         self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
     ) -> list[Outgoing]:
         """Only the GCS of SYSID_MYGCS counts (GCS_MAVLINK::handle_heartbeat)."""
-        if msg.get_srcSystem() != self._sim.gcs_system_id:
+        if msg.get_srcSystem() != self._param_int(PARAM_SYSID_MYGCS):
             return []
         self._gcs_seen_t_s, self._gcs_seen_wall_s = t_s, wall_s
         if not self.gcs_failsafe_active:
@@ -395,14 +513,22 @@ class ArduPlaneVehicle(SimVehicle):
 
     # ---- flight ------------------------------------------------------------------------------
 
+    def _gcs_failsafe_armed(self) -> bool:
+        """check_long_failsafe: FS_GCS_ENABL 1 or 2 in any mode, 3 only in AUTO (REMRSSI, the
+        other half of 2, is not imitated: there is no radio)."""
+        enabled = self._param_int(PARAM_FS_GCS_ENABL)
+        if enabled in (GCS_FAILSAFE_HEARTBEAT, GCS_FAILSAFE_HB_RSSI):
+            return True
+        return enabled == GCS_FAILSAFE_HB_AUTO and self.mode == AUTO
+
     def _mode_events(self, t_s: float, wall_s: float) -> list[Outgoing]:
-        """The GCS failsafe (check_long_failsafe with FS_GCS_ENABL = 1)."""
+        """The GCS failsafe (check_long_failsafe / failsafe_long_on_event)."""
         seen = self._gcs_seen_t_s
         if (
-            self.gcs_failsafe == "off"
-            or self.gcs_failsafe_active
+            self.gcs_failsafe_active
             or seen is None  # "gcs_last_seen_ms != 0": never before a first heartbeat
-            or t_s - seen <= self._sim.gcs_failsafe_timeout_s
+            or not self._gcs_failsafe_armed()
+            or t_s - seen <= self.params[PARAM_FS_LONG_TIMEOUT]
             or wall_s - self._gcs_seen_wall_s <= GCS_FAILSAFE_MIN_WALL_S
         ):
             return []
@@ -410,10 +536,10 @@ class ArduPlaneVehicle(SimVehicle):
         text = f"Failsafe. Long event on: type={FAILSAFE_GCS}/reason={MODE_REASON_GCS_FAILSAFE}"
         log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
         out = [self._statustext(mavlink.MAV_SEVERITY_WARNING, text)]
-        number = self.mode.custom_mode
-        continues = self.gcs_failsafe == "continue" and number in _FAILSAFE_CONTINUES
-        if not continues and self.mode not in (RTL, TAKEOFF):
-            self._set_mode(RTL, t_s)
+        target = long_failsafe_mode(self.mode.custom_mode, self._param_int(PARAM_FS_LONG_ACTN))
+        mode = None if target is None else mode_by_number(target)
+        if mode is not None and mode != self.mode:
+            self._set_mode(mode, t_s)
         out.append(self._heartbeat())  # system status CRITICAL, and the mode
         self._next_due[mavlink.MAVLINK_MSG_ID_HEARTBEAT] = t_s + 1.0
         return out

@@ -105,7 +105,8 @@ Outgoing = tuple[int, mavlink.MAVLink_message]  # (source component id, message)
 GeoLookup = Callable[[], tuple[float, float, float]]  # () -> (lat_deg, lon_deg, alt_amsl_m)
 
 
-def _param_name(param_id: str | bytes) -> str:
+def param_id_text(param_id: str | bytes) -> str:
+    """A PARAM_* message's param_id as text (NUL-padded to 16 bytes on the wire)."""
     if isinstance(param_id, bytes):
         param_id = param_id.decode("ascii", "replace")
     return param_id.split("\x00", 1)[0]
@@ -350,14 +351,14 @@ class SimVehicle:
                 return []
             names = list(_PARAM_TYPES)
             index = msg.param_index
-            name = names[index] if 0 <= index < len(names) else _param_name(msg.param_id)
+            name = names[index] if 0 <= index < len(names) else param_id_text(msg.param_id)
             return [self._param_value(name)] if name in _PARAM_TYPES else []
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             if msg.target_component not in (0, AUTOPILOT_COMPONENT):
                 return []
             return [self._param_value(name) for name in _PARAM_TYPES]
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_SET:
-            name = _param_name(msg.param_id)
+            name = param_id_text(msg.param_id)
             if name not in _PARAM_TYPES or msg.target_component not in (0, AUTOPILOT_COMPONENT):
                 return []
             self._set_param(name, msg.param_value)

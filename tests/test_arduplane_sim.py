@@ -5,6 +5,7 @@ import asyncio
 import math
 import socket
 from contextlib import aclosing
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from sitl.arduplane import (
     MAV_CMD_GUIDED_CHANGE_SPEED,
     ArduPlaneVehicle,
     heading_for_ground_course,
+    long_failsafe_mode,
 )
 from sitl.camera import TrackingCamera
 from sitl.config import SimConfig, default_vehicles
@@ -186,16 +188,17 @@ def test_course_over_ground_is_held_in_a_cross_wind():
     assert heading_for_ground_course(1.0, 0.0, 5.0, 0.0) == 1.0
 
 
-def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
-    def hb(src: int) -> mavlink.MAVLink_message:
-        return wire(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), src)
+def hb(src: int) -> mavlink.MAVLink_message:
+    return wire(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), src)
 
+
+def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
     v = plane(gcs_failsafe="return", gcs_system_id=255)
     v.handle(hb(MAVSDK_GCS_ID), 0.0, 0.0)  # MAVSDK's id: not the GCS this ArduPlane knows
     assert v.advance(0.02, 60.0, 60.0, 0.0, 0.0) == []
     assert v.gcs_failsafe_active is False
     v = guided_in_the_air()
-    v.gcs_failsafe = "continue"
+    v.params["FS_GCS_ENABL"], v.params["FS_LONG_ACTN"] = 1, 0  # heartbeat; continue
     v.handle(hb(255), 10.0, 10.0)
     assert v.advance(0.02, 14.0, 14.0, 0.0, 0.0) == []  # FS_LONG_TIMEOUT 5 s not yet over
     out = v.advance(0.02, 15.1, 15.1, 0.0, 0.0)
@@ -206,6 +209,93 @@ def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
     out = v.handle(hb(255), 16.0, 16.0)
     assert [m.text for _, m in out] == ["Failsafe. Long event off: reason=5"]
     assert v.gcs_failsafe_active is False
+
+
+def param_values(
+    out: list[tuple[int, mavlink.MAVLink_message]],
+) -> list[tuple[str, float, int, int]]:
+    return [
+        (m.param_id, m.param_value, m.param_type, m.param_index)
+        for _, m in out
+        if m.get_type() == "PARAM_VALUE"
+    ]
+
+
+def param_set(v: ArduPlaneVehicle, name: str, value: float, kind: int) -> list[tuple[int, Any]]:
+    msg = mavlink.MAVLink_param_set_message(1, 1, name.encode(), value, kind)
+    return v.handle(wire(msg), 0.0, 0.0)
+
+
+INT8, INT16, REAL32 = (
+    mavlink.MAV_PARAM_TYPE_INT8,
+    mavlink.MAV_PARAM_TYPE_INT16,
+    mavlink.MAV_PARAM_TYPE_REAL32,
+)
+
+
+def test_failsafe_parameters_are_served_as_arduplane_serves_them():
+    v = plane()  # stock: SYSID_MYGCS 255, FS_GCS_ENABL 0, FS_LONG_ACTN 0, FS_LONG_TIMEOUT 5
+    listed = v.handle(wire(mavlink.MAVLink_param_request_list_message(1, 1)), 0.0, 0.0)
+    # each with the type it is stored as and the value C-cast into the float field
+    assert param_values(listed) == [
+        ("SYSID_MYGCS", 255.0, INT16, 0),
+        ("FS_GCS_ENABL", 0.0, INT8, 1),
+        ("FS_LONG_ACTN", 0.0, INT8, 2),
+        ("FS_LONG_TIMEOUT", 5.0, REAL32, 3),
+    ]
+    by_name = mavlink.MAVLink_param_request_read_message(1, 1, b"SYSID_MYGCS", -1)
+    assert param_values(v.handle(wire(by_name), 0.0, 0.0)) == [("SYSID_MYGCS", 255.0, INT16, 65535)]
+    by_index = mavlink.MAVLink_param_request_read_message(1, 1, b"", 3)
+    assert param_values(v.handle(wire(by_index), 0.0, 0.0)) == [("FS_LONG_TIMEOUT", 5.0, REAL32, 3)]
+    unknown = mavlink.MAVLink_param_request_read_message(1, 1, b"COM_OBL_RC_ACT", -1)
+    assert v.handle(wire(unknown), 0.0, 0.0) == []  # ArduPilot does not answer it
+    # PARAM_SET: stored as its own type whatever the sender says, confirmed with index -1
+    assert param_values(param_set(v, "SYSID_MYGCS", 245.0, REAL32)) == [
+        ("SYSID_MYGCS", 245.0, INT16, 65535)
+    ]
+    assert param_values(param_set(v, "FS_GCS_ENABL", 0.996, INT8)) == [
+        ("FS_GCS_ENABL", 1.0, INT8, 65535)  # AP_Param::set_float adds 0.01, then truncates
+    ]
+    assert param_set(v, "FS_LONG_ACTN", math.nan, INT8) == []
+    v.param_write_denied = frozenset({"FS_LONG_ACTN"})
+    out = param_set(v, "FS_LONG_ACTN", 1.0, INT8)
+    assert [m.text for _, m in out if m.get_type() == "STATUSTEXT"] == [
+        "Param write denied (FS_LONG_ACTN)"
+    ]
+    assert param_values(out) == [("FS_LONG_ACTN", 0.0, INT8, 65535)]  # the value in force
+
+
+def test_gcs_failsafe_follows_its_parameters_live():
+    v = guided_in_the_air()  # stock parameters: FS_GCS_ENABL 0
+    v.handle(hb(MAVSDK_GCS_ID), 10.0, 10.0)
+    param_set(v, "FS_GCS_ENABL", 1.0, INT8)
+    param_set(v, "FS_LONG_ACTN", 1.0, INT8)
+    assert v.advance(0.02, 30.0, 30.0, 0.0, 0.0) == []  # 245's heartbeats do not count
+    param_set(v, "SYSID_MYGCS", MAVSDK_GCS_ID, INT16)
+    v.handle(hb(MAVSDK_GCS_ID), 40.0, 40.0)
+    param_set(v, "FS_LONG_TIMEOUT", 2.0, REAL32)
+    assert v.advance(0.02, 42.5, 42.5, 0.0, 0.0) == []  # 2.5 s of wall time not yet over
+    param_set(v, "FS_GCS_ENABL", 0.0, INT8)
+    assert v.advance(0.02, 43.0, 43.0, 0.0, 0.0) == []  # switched off again: nothing
+    param_set(v, "FS_GCS_ENABL", 1.0, INT8)
+    out = v.advance(0.02, 43.1, 43.1, 0.0, 0.0)
+    texts = [m.text for _, m in out if m.get_type() == "STATUSTEXT"]
+    assert texts == ["Failsafe. Long event on: type=3/reason=5"]
+    assert v.mode.name == "rtl"  # FS_LONG_ACTN 1
+
+
+def test_long_failsafe_action_by_mode_follows_failsafe_long_on_event():
+    guided, auto, loiter, rtl, manual = 15, 10, 12, 11, 0
+    assert long_failsafe_mode(guided, 0) is None  # continue: GUIDED flies its course on
+    assert long_failsafe_mode(auto, 0) is None
+    assert long_failsafe_mode(loiter, 0) == rtl  # every other mode returns on 0
+    assert long_failsafe_mode(manual, 0) == rtl
+    assert long_failsafe_mode(guided, 1) == rtl
+    assert long_failsafe_mode(guided, 2) == 5  # glide: FBWA
+    assert long_failsafe_mode(guided, 3) is None  # parachute: not imitated, the mode stays
+    assert long_failsafe_mode(guided, 4) == auto
+    assert long_failsafe_mode(rtl, 1) is None
+    assert long_failsafe_mode(rtl, 4) == auto
 
 
 # ---- the app's ArduPlane adapter over MAVSDK and UDP -----------------------------------------
@@ -307,11 +397,10 @@ async def test_leaving_guided_by_someone_else_is_reported():
         assert sim.truth().vehicles[0].mode == "rtl"
 
 
-async def test_gcs_failsafe_returns_when_mavsdk_heartbeats_stop():
-    # SYSID_MYGCS set to MAVSDK's 245: with ArduPilot's default 255 the failsafe never arms
-    config = sim_config(
-        1, speedup=SPEEDUP, autopilot="arduplane", gcs_failsafe="return", gcs_system_id=245
-    )
+async def test_stock_arduplane_is_made_to_return_when_mavsdk_heartbeats_stop():
+    # stock ArduPlane: SYSID_MYGCS 255 (not MAVSDK's 245), FS_GCS_ENABL 0, FS_LONG_ACTN 0;
+    # left so, it would fly its last GUIDED course for ever once the app goes silent
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
     link_config = LinkConfig(LIMITS, link_timeout_s=1.0)
     async with (
         asyncio.timeout(40.0),
@@ -320,8 +409,12 @@ async def test_gcs_failsafe_returns_when_mavsdk_heartbeats_stop():
         hub.link(1, link_config) as link,
         aclosing(link.events()) as events,
     ):
+        vehicle = sim.vehicles[0]
+        assert isinstance(vehicle, ArduPlaneVehicle)
         east = CourseSpeedCommand(math.pi / 2, 16.0)
-        await link.wait_ready(10.0)
+        await link.wait_ready(10.0)  # prepare() sets the three over MAVLink
+        assert vehicle.params["SYSID_MYGCS"] == MAVSDK_GCS_ID
+        assert (vehicle.params["FS_GCS_ENABL"], vehicle.params["FS_LONG_ACTN"]) == (1, 1)
         await link.arm()
         await link.take_off(10.0)
         await link.start_offboard(east)
@@ -335,3 +428,39 @@ async def test_gcs_failsafe_returns_when_mavsdk_heartbeats_stop():
         left = await next_event(events, LeftOffboard, 5.0)
         assert isinstance(left, LeftOffboard)
         assert left.flight_mode == "RTL"
+
+
+async def test_failsafe_parameters_already_right_are_not_written():
+    config = sim_config(
+        1, speedup=SPEEDUP, autopilot="arduplane", gcs_failsafe="return", gcs_system_id=245
+    )
+    async with (
+        asyncio.timeout(20.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+        hub.link(1, LinkConfig(LIMITS)) as link,
+    ):
+        vehicle = sim.vehicles[0]
+        assert isinstance(vehicle, ArduPlaneVehicle)
+        before = dict(vehicle.params)
+        vehicle.param_write_denied = frozenset(before)  # any write would fail prepare()
+        await link.wait_ready(10.0)
+        assert vehicle.params == before
+
+
+async def test_refused_failsafe_parameter_write_refuses_the_vehicle_before_take_off():
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
+    async with (
+        asyncio.timeout(20.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+        hub.link(1, LinkConfig(LIMITS)) as link,
+    ):
+        vehicle = sim.vehicles[0]
+        assert isinstance(vehicle, ArduPlaneVehicle)
+        vehicle.param_write_denied = frozenset({"FS_GCS_ENABL"})
+        # ArduPlane answers "Param write denied" with the old value; MAVSDK resends, then gives up
+        with pytest.raises(LinkError, match="cannot set FS_GCS_ENABL from 0 to 1: TIMEOUT"):
+            await link.wait_ready(10.0)
+        assert vehicle.params["FS_GCS_ENABL"] == 0
+        assert not vehicle.armed

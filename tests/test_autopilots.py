@@ -76,10 +76,18 @@ class CommandRecorder:
 
 
 class ParamRecorder:
-    def __init__(self, values: dict[str, int], fail: ParamResult | None = None) -> None:
+    """Param plugin: ``fail`` refuses every read, ``refuse`` the writes of those names."""
+
+    def __init__(
+        self,
+        values: dict[str, int],
+        fail: ParamResult | None = None,
+        refuse: dict[str, ParamResult] | None = None,
+    ) -> None:
         self.values = dict(values)
         self.sets: list[tuple[str, int]] = []
         self.fail = fail
+        self.refuse = refuse or {}
 
     async def get_param_int(self, name: str) -> int:
         if self.fail is not None:
@@ -88,6 +96,8 @@ class ParamRecorder:
 
     async def set_param_int(self, name: str, value: int) -> None:
         self.sets.append((name, value))
+        if name in self.refuse:
+            raise ParamError(self.refuse[name], "set_param_int()", name, value)
         self.values[name] = value
 
 
@@ -392,10 +402,79 @@ async def test_px4_parameter_failure_is_a_link_error():
 
 # ---- ArduPlane -------------------------------------------------------------------------------
 
+STOCK_ARDUPLANE = {"SYSID_MYGCS": 255, "FS_GCS_ENABL": 0, "FS_LONG_ACTN": 0}
+
+
+def arduplane(
+    commands: CommandRecorder | None = None,
+    params: ParamRecorder | None = None,
+    limits: SetpointLimits = LIMITS,
+    gcs_system_id: int | None = 245,
+) -> ArduPlaneAdapter:
+    return ArduPlaneAdapter(
+        vehicle_id=5,
+        commands=commands or CommandRecorder(),
+        params=params or ParamRecorder(STOCK_ARDUPLANE),
+        limits=limits,
+        gcs_system_id=gcs_system_id,
+    )
+
+
+async def test_arduplane_makes_a_stock_gcs_failsafe_return_it_and_says_so(caplog):
+    params = ParamRecorder(STOCK_ARDUPLANE)
+    with caplog.at_level("WARNING"):
+        await arduplane(params=params).prepare()
+    assert params.sets == [("SYSID_MYGCS", 245), ("FS_GCS_ENABL", 1), ("FS_LONG_ACTN", 1)]
+    assert params.values == {"SYSID_MYGCS": 245, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1}
+    changes = [r.getMessage() for r in caplog.records]
+    assert changes[0].startswith("vehicle 5: set SYSID_MYGCS from 255 to 245 so that")
+    assert changes[1].startswith("vehicle 5: set FS_GCS_ENABL from 0 to 1 so that")
+    assert changes[2].startswith("vehicle 5: set FS_LONG_ACTN from 0 to 1 so that")
+
+
+async def test_arduplane_leaves_a_failsafe_that_already_returns_it_alone():
+    # FS_GCS_ENABL 2 (heartbeat and REMRSSI) and FS_LONG_ACTN 2 (glide) are operators' choices
+    params = ParamRecorder({"SYSID_MYGCS": 245, "FS_GCS_ENABL": 2, "FS_LONG_ACTN": 2})
+    await arduplane(params=params).prepare()
+    assert params.sets == []
+
+
+async def test_arduplane_failsafe_in_auto_only_does_not_protect_guided():
+    params = ParamRecorder({"SYSID_MYGCS": 245, "FS_GCS_ENABL": 3, "FS_LONG_ACTN": 1})
+    await arduplane(params=params).prepare()
+    assert params.sets == [("FS_GCS_ENABL", 1)]
+
+
+async def test_arduplane_gcs_system_id_is_the_one_given():
+    params = ParamRecorder(STOCK_ARDUPLANE)
+    await arduplane(params=params, gcs_system_id=17).prepare()
+    assert params.sets[0] == ("SYSID_MYGCS", 17)
+
+
+async def test_arduplane_refused_parameter_write_is_a_link_error_naming_it():
+    params = ParamRecorder(STOCK_ARDUPLANE, refuse={"FS_GCS_ENABL": ParamResult.TIMEOUT})
+    with pytest.raises(LinkError, match="vehicle 5: cannot set FS_GCS_ENABL from 0 to 1: TIMEOUT"):
+        await arduplane(params=params).prepare()
+    assert params.sets == [("SYSID_MYGCS", 245), ("FS_GCS_ENABL", 1)]  # nothing after it
+
+
+async def test_arduplane_unreadable_parameter_is_a_link_error_naming_it():
+    params = ParamRecorder({}, fail=ParamResult.WRONG_TYPE)
+    with pytest.raises(LinkError, match="vehicle 5: cannot read SYSID_MYGCS: WRONG_TYPE"):
+        await arduplane(params=params).prepare()
+
+
+async def test_arduplane_without_gcs_system_id_touches_no_parameter(caplog):
+    params = ParamRecorder({}, fail=ParamResult.TIMEOUT)  # any read would raise
+    with caplog.at_level("WARNING"):
+        await arduplane(params=params, gcs_system_id=None).prepare()
+    assert params.sets == []
+    assert "left unchecked" in caplog.text
+
 
 async def test_arduplane_switches_to_guided_then_sends_heading_speed_altitude():
     commands = CommandRecorder()
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    adapter = arduplane(commands, limits=LIMITS)
     await adapter.start(CourseSpeedCommand(-math.pi / 2, 15.0), 120.0, STATE)
     mode, heading, speed, altitude = commands.sent
     assert mode[:3] == ("COMMAND_LONG", 5, 1)
@@ -416,7 +495,7 @@ async def test_arduplane_switches_to_guided_then_sends_heading_speed_altitude():
 
 async def test_arduplane_sends_only_what_changed():
     commands = CommandRecorder()
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    adapter = arduplane(commands, limits=LIMITS)
     await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
     await adapter.send(CourseSpeedCommand(math.radians(0.2), 15.05, None), 100.2, STATE)
     assert len(commands.sent) == 3
@@ -426,7 +505,7 @@ async def test_arduplane_sends_only_what_changed():
 
 
 async def test_arduplane_refusal_names_the_command_and_result():
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=CommandRecorder(result=4), limits=LIMITS)
+    adapter = arduplane(CommandRecorder(result=4), limits=LIMITS)
     with pytest.raises(
         LinkError, match="vehicle 5: mode change to GUIDED refused: MAV_RESULT_FAILED"
     ):
@@ -435,7 +514,7 @@ async def test_arduplane_refusal_names_the_command_and_result():
 
 async def test_arduplane_stop_loiters():
     commands = CommandRecorder()
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    adapter = arduplane(commands, limits=LIMITS)
     await adapter.stop()
     ((_, _, _, fields),) = commands.sent
     assert (fields["command"], fields["param1"], fields["param2"]) == (176, 1.0, 12.0)
@@ -446,7 +525,7 @@ async def test_arduplane_without_a_course_rate_limit_does_not_send_a_lateral_acc
     # 0 would bank it by 0.3 degrees. Unlimited must be a value that leaves the turn to it.
     commands = CommandRecorder()
     free = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=None)
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=free)
+    adapter = arduplane(commands, limits=free)
     await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
     heading = commands.sent[0][3]
     assert heading["command"] == 43002
@@ -455,7 +534,7 @@ async def test_arduplane_without_a_course_rate_limit_does_not_send_a_lateral_acc
 
 async def test_arduplane_takes_off_in_takeoff_mode():
     commands = CommandRecorder()
-    adapter = ArduPlaneAdapter(vehicle_id=5, commands=commands, limits=LIMITS)
+    adapter = arduplane(commands, limits=LIMITS)
     await adapter.take_off()
     ((name, _, _, fields),) = commands.sent
     assert (name, fields["command"], fields["param1"], fields["param2"]) == (

@@ -7,7 +7,8 @@ Three forms (design.md section 5):
   (``set_position_velocity_ned``; PX4 fixed-wing ignores velocity-only setpoints) and the airspeed
   by MAV_CMD_DO_CHANGE_SPEED whenever it changes; COM_OBL_RC_ACT checked (and set if asked);
 - ``arduplane``: GUIDED mode with MAV_CMD_GUIDED_CHANGE_HEADING / _SPEED / _ALTITUDE
-  (ardupilotmega dialect) sent as COMMAND_INT through MavlinkDirect.
+  (ardupilotmega dialect) sent as COMMAND_INT through MavlinkDirect; SYSID_MYGCS, FS_GCS_ENABL
+  and FS_LONG_ACTN checked and set so that ArduPlane's GCS failsafe returns it if we go silent.
 
 Every setpoint passes ``limit_setpoint`` first (speed within limits, course changing no faster
 than the course-rate limit) and every number that leaves is checked finite.
@@ -18,7 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Final, Literal, Protocol
 
@@ -601,6 +602,22 @@ class Px4FixedWingAdapter:
         await _offboard_call("offboard stop (hold)", self.vehicle_id, self.offboard.stop())
 
 
+SYSID_MYGCS: Final = "SYSID_MYGCS"
+FS_GCS_ENABL: Final = "FS_GCS_ENABL"
+FS_LONG_ACTN: Final = "FS_LONG_ACTN"
+#: MAVSDK's ground station identifies as system 245 (Configuration for GROUND_STATION)
+MAVSDK_GCS_SYSTEM_ID: Final = 245
+#: FS_GCS_ENABL 1: the GCS failsafe on heartbeat loss, in every mode
+FS_GCS_ENABL_HEARTBEAT: Final = 1
+#: FS_GCS_ENABL values that leave GUIDED unprotected: 0 (off, ArduPlane's default) and 3
+#: (heartbeat loss counted in AUTO only; ``check_long_failsafe``)
+FS_GCS_ENABL_NOT_IN_GUIDED: Final = (0, 3)
+#: FS_LONG_ACTN 0 (continue, ArduPlane's default) keeps GUIDED flying its last course through
+#: the failsafe (``failsafe_long_on_event``); 1 returns (RTL)
+FS_LONG_ACTN_CONTINUE: Final = 0
+FS_LONG_ACTN_RTL: Final = 1
+
+
 @dataclass(slots=True)
 class ArduPlaneAdapter:
     """ArduPlane GUIDED: course over ground, airspeed and altitude by the guided slew commands.
@@ -610,11 +627,23 @@ class ArduPlaneAdapter:
     speed * max course rate (m/s^2); ArduPlane banks at most atan(param3 / g), so its course
     rate stays under param3 / speed. Take-off is TAKEOFF mode: ArduPlane refuses
     MAV_CMD_NAV_TAKEOFF (which MAVSDK's ``Action.takeoff`` sends) unless it is a QuadPlane.
+
+    GUIDED has no setpoint stream and so no offboard-loss failsafe: if the app dies the aircraft
+    flies its last course for ever unless ArduPlane's GCS failsafe catches it. Stock ArduPlane
+    has it off (FS_GCS_ENABL 0), counts only heartbeats from SYSID_MYGCS (255, not MAVSDK's
+    245) and, in GUIDED, continues through it (FS_LONG_ACTN 0). So before take-off ``prepare``
+    reads the three and sets SYSID_MYGCS to ``gcs_system_id``, FS_GCS_ENABL 0 or 3 to 1
+    (heartbeat) and FS_LONG_ACTN 0 to 1 (RTL), logging each change; other values are the
+    operator's and are kept. A read or write that fails is a ``LinkError`` naming the parameter:
+    a vehicle that cannot be made to return is refused. ``gcs_system_id`` None leaves all three
+    alone (a warning is logged).
     """
 
     vehicle_id: int
     commands: CommandPort
+    params: ParamPort
     limits: SetpointLimits
+    gcs_system_id: int | None = MAVSDK_GCS_SYSTEM_ID
     target_component: int = 1
     course_deadband_rad: float = math.radians(0.5)
     speed_deadband_m_s: float = 0.1
@@ -632,7 +661,61 @@ class ArduPlaneAdapter:
         return "GUIDED"
 
     async def prepare(self) -> None:
-        return None
+        gcs = self.gcs_system_id
+        if gcs is None:
+            log.warning(
+                "vehicle %d: %s, %s and %s left unchecked: if this ground station goes silent "
+                "the aircraft does what its own GCS failsafe settings say (stock: fly on)",
+                self.vehicle_id,
+                SYSID_MYGCS,
+                FS_GCS_ENABL,
+                FS_LONG_ACTN,
+            )
+            return
+        await self._ensure_param(
+            SYSID_MYGCS,
+            lambda value: value == gcs,
+            gcs,
+            f"so that the GCS failsafe counts this ground station's heartbeats (system {gcs})",
+        )
+        await self._ensure_param(
+            FS_GCS_ENABL,
+            lambda value: value not in FS_GCS_ENABL_NOT_IN_GUIDED,
+            FS_GCS_ENABL_HEARTBEAT,
+            "so that losing this ground station's heartbeats raises the GCS failsafe in GUIDED",
+        )
+        await self._ensure_param(
+            FS_LONG_ACTN,
+            lambda value: value != FS_LONG_ACTN_CONTINUE,
+            FS_LONG_ACTN_RTL,
+            "so that the GCS failsafe returns (RTL) instead of flying the last GUIDED course on",
+        )
+
+    async def _ensure_param(
+        self, name: str, acceptable: Callable[[int], bool], wanted: int, why: str
+    ) -> None:
+        """Read ``name``; when it is not acceptable set it to ``wanted`` and say why."""
+        try:
+            current = await self.params.get_param_int(name)
+        except ParamError as exc:
+            raise LinkError(
+                f"vehicle {self.vehicle_id}: cannot read {name}: {exc.result.name}; refusing a "
+                "vehicle whose GCS failsafe cannot be checked"
+            ) from exc
+        log.info("vehicle %d: %s = %d", self.vehicle_id, name, current)
+        if acceptable(current):
+            return
+        try:
+            await self.params.set_param_int(name, wanted)
+        except ParamError as exc:
+            raise LinkError(
+                f"vehicle {self.vehicle_id}: cannot set {name} from {current} to {wanted}: "
+                f"{exc.result.name}; refusing a vehicle whose GCS failsafe cannot be made to "
+                "return it"
+            ) from exc
+        log.warning(
+            "vehicle %d: set %s from %d to %d %s", self.vehicle_id, name, current, wanted, why
+        )
 
     def mode_command(self, custom_mode: int) -> MavlinkMessage:
         return command_long(

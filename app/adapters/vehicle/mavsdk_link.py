@@ -41,6 +41,7 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 from app.adapters.vehicle.autopilots import (
     MAV_MODE_FLAG_SAFETY_ARMED,
+    MAVSDK_GCS_SYSTEM_ID,
     ArduPlaneAdapter,
     AutopilotAdapter,
     AutopilotName,
@@ -247,6 +248,8 @@ class LinkConfig:
     ``airborne_altitude_m``: above this height over home the vehicle counts as in the air even
     before its landed state (EXTENDED_SYS_STATE, often 1 Hz) says so.
     ``px4_offboard_loss_action``: COM_OBL_RC_ACT to set on PX4 (None: leave it alone).
+    ``arduplane_gcs_failsafe``: on ArduPlane, set SYSID_MYGCS to our system id and make the GCS
+    failsafe return the aircraft (False: leave SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN alone).
     """
 
     limits: SetpointLimits
@@ -258,6 +261,7 @@ class LinkConfig:
     camera_component_id: int | None = MAV_COMP_ID_CAMERA
     autopilot_component_id: int = MAV_COMP_ID_AUTOPILOT1
     px4_offboard_loss_action: int | None = 5
+    arduplane_gcs_failsafe: bool = True
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -307,8 +311,10 @@ class MavsdkVehicleLink:
         origin: GeodeticOrigin,
         config: LinkConfig,
         clock: Callable[[], float] = time.monotonic,
+        gcs_system_id: int = MAVSDK_GCS_SYSTEM_ID,
     ) -> None:
         self._system = system
+        self._gcs_system_id = gcs_system_id
         self._id = system_id
         self._origin = origin
         self._config = config
@@ -455,7 +461,9 @@ class MavsdkVehicleLink:
             return ArduPlaneAdapter(
                 vehicle_id=self._id,
                 commands=self._direct,
+                params=self._param,
                 limits=limits,
+                gcs_system_id=self._gcs_system_id if self._config.arduplane_gcs_failsafe else None,
                 target_component=self._config.autopilot_component_id,
             )
         return VelocityAdapter(vehicle_id=self._id, offboard=self._offboard_plugin, limits=limits)
@@ -848,12 +856,15 @@ class MavsdkHub:
         self._clock = clock
         self._route_logs = route_logs
         self._mavsdk: Mavsdk | None = None
+        self._gcs_system_id = MAVSDK_GCS_SYSTEM_ID
         self._open_ids: set[int] = set()
 
     async def __aenter__(self) -> MavsdkHub:
         if self._route_logs:
             route_mavsdk_logs()
-        mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        configuration = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        self._gcs_system_id = configuration.system_id  # what ArduPlane's SYSID_MYGCS must be
+        mavsdk = Mavsdk(configuration)
         try:
             for url in self._urls:
                 await mavsdk.add_any_connection(url)
@@ -916,7 +927,7 @@ class MavsdkHub:
         self._open_ids.add(system_id)
         try:
             async with MavsdkVehicleLink(
-                system, system_id, self._origin, config, self._clock
+                system, system_id, self._origin, config, self._clock, self._gcs_system_id
             ) as link:
                 yield link
         finally:
