@@ -118,6 +118,7 @@ class SitlScenario(StrictModel):
     gcs_failsafe: Literal["off", "continue", "return"] = "off"
     gcs_failsafe_timeout_s: Positive = 5.0
     gcs_system_id: Annotated[int, Field(ge=1, le=255)] = 255
+    gcs_sysid_param: Literal["SYSID_MYGCS", "MAV_GCS_SYSID"] = "SYSID_MYGCS"
 
     def build(
         self,
@@ -151,6 +152,7 @@ class SitlScenario(StrictModel):
                 gcs_failsafe=self.gcs_failsafe,
                 gcs_failsafe_timeout_s=self.gcs_failsafe_timeout_s,
                 gcs_system_id=self.gcs_system_id,
+                gcs_sysid_param=self.gcs_sysid_param,
                 camera=self.camera.build(),
                 wind=self.wind.build(),
             )

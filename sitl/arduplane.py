@@ -64,6 +64,18 @@ PARAM_TYPES: Final = {
     PARAM_FS_LONG_ACTN: mavlink.MAV_PARAM_TYPE_INT8,
     PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
 }
+# ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (libraries/GCS_MAVLink/GCS.cpp, default
+# 255) and added MAV_GCS_SYSID_HI (default 0): when HI >= MAV_GCS_SYSID every system id from
+# MAV_GCS_SYSID to HI is a GCS, else only MAV_GCS_SYSID (GCS::sysid_is_gcs)
+PARAM_MAV_GCS_SYSID: Final = "MAV_GCS_SYSID"
+PARAM_MAV_GCS_SYSID_HI: Final = "MAV_GCS_SYSID_HI"
+PARAM_TYPES_4_7: Final = {
+    PARAM_MAV_GCS_SYSID: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_MAV_GCS_SYSID_HI: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_FS_GCS_ENABL: mavlink.MAV_PARAM_TYPE_INT8,
+    PARAM_FS_LONG_ACTN: mavlink.MAV_PARAM_TYPE_INT8,
+    PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+}
 _INT_RANGES: Final = {
     mavlink.MAV_PARAM_TYPE_INT8: (-128, 127),
     mavlink.MAV_PARAM_TYPE_INT16: (-32768, 32767),
@@ -226,8 +238,16 @@ class ArduPlaneVehicle(SimVehicle):
         self._air_altitude_m = self.config.altitude_m
         self._reset_guided()
         failsafe = self._sim.gcs_failsafe
+        new_names = self._sim.gcs_sysid_param == PARAM_MAV_GCS_SYSID
+        #: the parameters served and their MAV_PARAM_TYPE (ArduPilot 4.7 names or the older ones)
+        self.param_types: dict[str, int] = dict(PARAM_TYPES_4_7 if new_names else PARAM_TYPES)
+        gcs_ids: dict[str, float] = (
+            {PARAM_MAV_GCS_SYSID: float(self._sim.gcs_system_id), PARAM_MAV_GCS_SYSID_HI: 0.0}
+            if new_names
+            else {PARAM_SYSID_MYGCS: float(self._sim.gcs_system_id)}
+        )
         self.params: dict[str, float] = {
-            PARAM_SYSID_MYGCS: float(self._sim.gcs_system_id),
+            **gcs_ids,
             PARAM_FS_GCS_ENABL: 0.0 if failsafe == "off" else float(GCS_FAILSAFE_HEARTBEAT),
             PARAM_FS_LONG_ACTN: float(
                 FS_ACTION_LONG_RTL if failsafe == "return" else FS_ACTION_LONG_CONTINUE
@@ -357,7 +377,8 @@ class ArduPlaneVehicle(SimVehicle):
         index is -1 (answered with index -1); PARAM_SET: the value stored as its type, confirmed
         with PARAM_VALUE. Unknown names, bad indices and non-finite values get no answer."""
         msg_id = msg.get_msgId()
-        names = list(PARAM_TYPES)
+        types = self.param_types
+        names = list(types)
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             return [self._param_value_message(name, names.index(name)) for name in names]
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
@@ -366,11 +387,11 @@ class ArduPlaneVehicle(SimVehicle):
                 known = 0 <= index < len(names)
                 return [self._param_value_message(names[index], index)] if known else []
             name = param_id_text(msg.param_id)
-            known = name in PARAM_TYPES
+            known = name in types
             return [self._param_value_message(name, PARAM_INDEX_NONE)] if known else []
         name = param_id_text(msg.param_id)
         value = float(msg.param_value)
-        if name not in PARAM_TYPES or not math.isfinite(value):
+        if name not in types or not math.isfinite(value):
             return []
         if name in self.param_write_denied:
             text = f"Param write denied ({name})"
@@ -378,23 +399,38 @@ class ArduPlaneVehicle(SimVehicle):
                 self._statustext(mavlink.MAV_SEVERITY_WARNING, text),
                 self._param_value_message(name, PARAM_INDEX_NONE),  # the value in force
             ]
-        self.params[name] = param_value_from_wire(PARAM_TYPES[name], value)
+        self.params[name] = param_value_from_wire(types[name], value)
         log.info("vehicle %d: %s set to %g", self.system_id, name, self.params[name])
         return [self._param_value_message(name, PARAM_INDEX_NONE)]
 
     def _param_value_message(self, name: str, index: int) -> Outgoing:
         return AUTOPILOT_COMPONENT, mavlink.MAVLink_param_value_message(
-            name.encode("ascii"), self.params[name], PARAM_TYPES[name], len(PARAM_TYPES), index
+            name.encode("ascii"),
+            self.params[name],
+            self.param_types[name],
+            len(self.param_types),
+            index,
         )
 
     def _param_int(self, name: str) -> int:
         return int(self.params[name])
 
+    def is_gcs(self, system_id: int) -> bool:
+        """Whether heartbeats from ``system_id`` are the GCS's: SYSID_MYGCS, or from ArduPilot
+        4.7 MAV_GCS_SYSID, or the range up to MAV_GCS_SYSID_HI when that is not below it
+        (GCS::sysid_is_gcs)."""
+        if PARAM_SYSID_MYGCS in self.params:
+            return system_id == self._param_int(PARAM_SYSID_MYGCS)
+        low, high = self._param_int(PARAM_MAV_GCS_SYSID), self._param_int(PARAM_MAV_GCS_SYSID_HI)
+        if high <= low:
+            return system_id == low
+        return low <= system_id <= high
+
     def _on_gcs_heartbeat(
         self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
     ) -> list[Outgoing]:
         """Only the GCS of SYSID_MYGCS counts (GCS_MAVLINK::handle_heartbeat)."""
-        if msg.get_srcSystem() != self._param_int(PARAM_SYSID_MYGCS):
+        if not self.is_gcs(msg.get_srcSystem()):
             return []
         self._gcs_seen_t_s, self._gcs_seen_wall_s = t_s, wall_s
         if not self.gcs_failsafe_active:

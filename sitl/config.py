@@ -166,6 +166,9 @@ def stationary_target(east_m: float = 0.0, north_m: float = 0.0) -> TargetPath:
 FailsafeAction = Literal["hold", "return"]
 Autopilot = Literal["px4", "arduplane"]
 GcsFailsafe = Literal["off", "continue", "return"]
+#: the parameter that names ArduPlane's GCS: SYSID_MYGCS up to ArduPilot 4.6, MAV_GCS_SYSID
+#: (with the range's top, MAV_GCS_SYSID_HI) from 4.7
+GcsSysidParam = Literal["SYSID_MYGCS", "MAV_GCS_SYSID"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,7 +190,8 @@ class SimConfig:
     Autopilot: ``"px4"`` (the default) imitates PX4; ``"arduplane"`` imitates ArduPlane
     (``sitl.arduplane``), whose GCS failsafe is ``gcs_failsafe`` (FS_GCS_ENABL and FS_LONG_ACTN:
     off, as ArduPlane's default; continue; return = RTL) after ``gcs_failsafe_timeout_s``
-    (FS_LONG_TIMEOUT) without a HEARTBEAT from system ``gcs_system_id`` (SYSID_MYGCS).
+    (FS_LONG_TIMEOUT) without a HEARTBEAT from system ``gcs_system_id`` (SYSID_MYGCS, or
+    MAV_GCS_SYSID when ``gcs_sysid_param`` names ArduPilot 4.7's parameter).
     """
 
     vehicles: tuple[VehicleConfig, ...]
@@ -210,6 +214,7 @@ class SimConfig:
     gcs_failsafe: GcsFailsafe = "off"
     gcs_failsafe_timeout_s: float = 5.0
     gcs_system_id: int = 255
+    gcs_sysid_param: GcsSysidParam = "SYSID_MYGCS"
     camera: CameraConfig = field(default_factory=CameraConfig)
     wind: WindConfig = field(default_factory=WindConfig)
 
@@ -247,3 +252,8 @@ class SimConfig:
         _positive("gcs_failsafe_timeout_s", self.gcs_failsafe_timeout_s)
         if not 1 <= self.gcs_system_id <= 255:
             raise ValueError(f"gcs_system_id must be in 1..255, got {self.gcs_system_id!r}")
+        if self.gcs_sysid_param not in ("SYSID_MYGCS", "MAV_GCS_SYSID"):
+            raise ValueError(
+                "gcs_sysid_param must be 'SYSID_MYGCS' or 'MAV_GCS_SYSID', got "
+                f"{self.gcs_sysid_param!r}"
+            )

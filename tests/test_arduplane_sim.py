@@ -284,6 +284,25 @@ def test_gcs_failsafe_follows_its_parameters_live():
     assert v.mode.name == "rtl"  # FS_LONG_ACTN 1
 
 
+def test_ardupilot_4_7_names_the_gcs_by_mav_gcs_sysid_and_a_range():
+    v = plane(gcs_sysid_param="MAV_GCS_SYSID")  # ArduPilot 4.7: SYSID_MYGCS renamed
+    listed = v.handle(wire(mavlink.MAVLink_param_request_list_message(1, 1)), 0.0, 0.0)
+    assert [(name, value) for name, value, _, _ in param_values(listed)][:2] == [
+        ("MAV_GCS_SYSID", 255.0),
+        ("MAV_GCS_SYSID_HI", 0.0),
+    ]
+    old_name = mavlink.MAVLink_param_request_read_message(1, 1, b"SYSID_MYGCS", -1)
+    assert v.handle(wire(old_name), 0.0, 0.0) == []  # no longer there: no answer
+    assert v.is_gcs(255)
+    assert not v.is_gcs(MAVSDK_GCS_ID)
+    param_set(v, "MAV_GCS_SYSID_HI", 250.0, INT16)  # below MAV_GCS_SYSID: still 255 alone
+    assert not v.is_gcs(250)
+    param_set(v, "MAV_GCS_SYSID", 240.0, INT16)  # 240..250: a range of ground stations
+    assert v.is_gcs(MAVSDK_GCS_ID)
+    assert v.is_gcs(240)
+    assert not v.is_gcs(251)
+
+
 def test_long_failsafe_action_by_mode_follows_failsafe_long_on_event():
     guided, auto, loiter, rtl, manual = 15, 10, 12, 11, 0
     assert long_failsafe_mode(guided, 0) is None  # continue: GUIDED flies its course on
@@ -428,6 +447,23 @@ async def test_stock_arduplane_is_made_to_return_when_mavsdk_heartbeats_stop():
         left = await next_event(events, LeftOffboard, 5.0)
         assert isinstance(left, LeftOffboard)
         assert left.flight_mode == "RTL"
+
+
+async def test_arduplane_4_7_gets_its_gcs_id_under_the_new_name():
+    # SYSID_MYGCS goes unanswered (MAVSDK times out on it); MAV_GCS_SYSID is set instead
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane", gcs_sysid_param="MAV_GCS_SYSID")
+    async with (
+        asyncio.timeout(30.0),
+        running_sim(config) as sim,
+        MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+        hub.link(1, LinkConfig(LIMITS)) as link,
+    ):
+        vehicle = sim.vehicles[0]
+        assert isinstance(vehicle, ArduPlaneVehicle)
+        await link.wait_ready(20.0)
+        assert vehicle.params["MAV_GCS_SYSID"] == MAVSDK_GCS_ID
+        assert vehicle.is_gcs(MAVSDK_GCS_ID)
+        assert (vehicle.params["FS_GCS_ENABL"], vehicle.params["FS_LONG_ACTN"]) == (1, 1)
 
 
 async def test_failsafe_parameters_already_right_are_not_written():

@@ -92,6 +92,8 @@ class ParamRecorder:
     async def get_param_int(self, name: str) -> int:
         if self.fail is not None:
             raise ParamError(self.fail, "get_param_int()", name)
+        if name not in self.values:  # ArduPilot does not answer for a name it does not have
+            raise ParamError(ParamResult.TIMEOUT, "get_param_int()", name)
         return self.values[name]
 
     async def set_param_int(self, name: str, value: int) -> None:
@@ -460,8 +462,35 @@ async def test_arduplane_refused_parameter_write_is_a_link_error_naming_it():
 
 async def test_arduplane_unreadable_parameter_is_a_link_error_naming_it():
     params = ParamRecorder({}, fail=ParamResult.WRONG_TYPE)
-    with pytest.raises(LinkError, match="vehicle 5: cannot read SYSID_MYGCS: WRONG_TYPE"):
+    with pytest.raises(
+        LinkError,
+        match=r"vehicle 5: cannot read SYSID_MYGCS \(WRONG_TYPE\) or MAV_GCS_SYSID \(WRONG_TYPE\)",
+    ):
         await arduplane(params=params).prepare()
+    # the failsafe parameters are named as they are
+    no_fs = ParamRecorder({"SYSID_MYGCS": 245})
+    with pytest.raises(LinkError, match="vehicle 5: cannot read FS_GCS_ENABL: TIMEOUT"):
+        await arduplane(params=no_fs).prepare()
+
+
+async def test_arduplane_4_7_has_its_gcs_id_set_under_the_new_name():
+    # ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (and added MAV_GCS_SYSID_HI)
+    params = ParamRecorder(
+        {"MAV_GCS_SYSID": 255, "MAV_GCS_SYSID_HI": 0, "FS_GCS_ENABL": 0, "FS_LONG_ACTN": 0}
+    )
+    await arduplane(params=params).prepare()
+    assert params.sets == [("MAV_GCS_SYSID", 245), ("FS_GCS_ENABL", 1), ("FS_LONG_ACTN", 1)]
+
+
+@pytest.mark.parametrize(
+    ("low", "high", "changed"),
+    [(240, 250, False), (245, 0, False), (200, 240, True), (250, 0, True), (255, 250, True)],
+)
+async def test_arduplane_4_7_keeps_a_gcs_id_range_that_holds_ours(low, high, changed):
+    values = {"MAV_GCS_SYSID": low, "MAV_GCS_SYSID_HI": high, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1}
+    params = ParamRecorder(values)
+    await arduplane(params=params).prepare()
+    assert params.sets == ([("MAV_GCS_SYSID", 245)] if changed else [])
 
 
 async def test_arduplane_without_gcs_system_id_touches_no_parameter(caplog):

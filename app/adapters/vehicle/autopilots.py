@@ -603,6 +603,9 @@ class Px4FixedWingAdapter:
 
 
 SYSID_MYGCS: Final = "SYSID_MYGCS"
+#: ArduPilot 4.7's name for SYSID_MYGCS, and the top of the range of GCS ids it may name
+MAV_GCS_SYSID: Final = "MAV_GCS_SYSID"
+MAV_GCS_SYSID_HI: Final = "MAV_GCS_SYSID_HI"
 FS_GCS_ENABL: Final = "FS_GCS_ENABL"
 FS_LONG_ACTN: Final = "FS_LONG_ACTN"
 #: MAVSDK's ground station identifies as system 245 (Configuration for GROUND_STATION)
@@ -636,7 +639,9 @@ class ArduPlaneAdapter:
     (heartbeat) and FS_LONG_ACTN 0 to 1 (RTL), logging each change; other values are the
     operator's and are kept. A read or write that fails is a ``LinkError`` naming the parameter:
     a vehicle that cannot be made to return is refused. ``gcs_system_id`` None leaves all three
-    alone (a warning is logged).
+    alone (a warning is logged). ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (with
+    MAV_GCS_SYSID_HI, the top of a range of GCS ids when not below it): when SYSID_MYGCS cannot
+    be read, that one is checked and set instead (a range that holds ``gcs_system_id`` is kept).
     """
 
     vehicle_id: int
@@ -672,11 +677,13 @@ class ArduPlaneAdapter:
                 FS_LONG_ACTN,
             )
             return
+        name, current, high = await self._gcs_id_params()
         await self._ensure_param(
-            SYSID_MYGCS,
-            lambda value: value == gcs,
+            name,
+            lambda value: value == gcs or value <= gcs <= high,
             gcs,
             f"so that the GCS failsafe counts this ground station's heartbeats (system {gcs})",
+            current,
         )
         await self._ensure_param(
             FS_GCS_ENABL,
@@ -691,17 +698,53 @@ class ArduPlaneAdapter:
             "so that the GCS failsafe returns (RTL) instead of flying the last GUIDED course on",
         )
 
-    async def _ensure_param(
-        self, name: str, acceptable: Callable[[int], bool], wanted: int, why: str
-    ) -> None:
-        """Read ``name``; when it is not acceptable set it to ``wanted`` and say why."""
+    async def _gcs_id_params(self) -> tuple[str, int, int]:
+        """The parameter naming the vehicle's GCS, its value, and the top of the range of GCS
+        ids (below the value: none): SYSID_MYGCS, else ArduPilot 4.7's MAV_GCS_SYSID with
+        MAV_GCS_SYSID_HI (0, its default, when that cannot be read)."""
         try:
-            current = await self.params.get_param_int(name)
-        except ParamError as exc:
-            raise LinkError(
-                f"vehicle {self.vehicle_id}: cannot read {name}: {exc.result.name}; refusing a "
-                "vehicle whose GCS failsafe cannot be checked"
-            ) from exc
+            return SYSID_MYGCS, await self.params.get_param_int(SYSID_MYGCS), -1
+        except ParamError as old:
+            try:
+                current = await self.params.get_param_int(MAV_GCS_SYSID)
+            except ParamError as exc:
+                raise LinkError(
+                    f"vehicle {self.vehicle_id}: cannot read {SYSID_MYGCS} ({old.result.name}) "
+                    f"or {MAV_GCS_SYSID} ({exc.result.name}); refusing a vehicle whose GCS "
+                    "failsafe cannot be checked"
+                ) from exc
+        try:
+            high = await self.params.get_param_int(MAV_GCS_SYSID_HI)
+        except ParamError:
+            high = 0
+        log.info(
+            "vehicle %d: %s (ArduPilot 4.7 or later) = %d, %s = %d",
+            self.vehicle_id,
+            MAV_GCS_SYSID,
+            current,
+            MAV_GCS_SYSID_HI,
+            high,
+        )
+        return MAV_GCS_SYSID, current, high
+
+    async def _ensure_param(
+        self,
+        name: str,
+        acceptable: Callable[[int], bool],
+        wanted: int,
+        why: str,
+        current: int | None = None,
+    ) -> None:
+        """Read ``name`` (unless its ``current`` value is given); when it is not acceptable set
+        it to ``wanted`` and say why."""
+        if current is None:
+            try:
+                current = await self.params.get_param_int(name)
+            except ParamError as exc:
+                raise LinkError(
+                    f"vehicle {self.vehicle_id}: cannot read {name}: {exc.result.name}; refusing "
+                    "a vehicle whose GCS failsafe cannot be checked"
+                ) from exc
         log.info("vehicle %d: %s = %d", self.vehicle_id, name, current)
         if acceptable(current):
             return
