@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
 
     def notify(line: str) -> None:
-        console.print(f"standoff ground: {line}", highlight=False, markup=False)
+        console.print(f"standoff ground: {line}", highlight=False, markup=False, soft_wrap=True)
         sys.stdout.flush()
 
     notify(f"{config.name}, {plan.count} vehicles, run folder {out}")
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
                 notify=notify,
             )
         )
-    console.print(report(result.summary), highlight=False, markup=False)
+    console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)
     if result.interrupted:
         notify("interrupted: the agents were told to shut down; partial results written")
         return 130
