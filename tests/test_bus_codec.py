@@ -62,10 +62,12 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Message]] = {
         east_m=finite, north_m=finite, sigma_m=st.floats(min_value=1e-9, max_value=1e9),
     ),
     LocalEstimate: st.builds(
-        LocalEstimate, sender=names, t_s=finite, vehicle=vehicles, x=states, P=covariances()
+        LocalEstimate, sender=names, t_s=finite, vehicle=vehicles, x=states, P=covariances(),
+        alloc_t_s=st.none() | finite,
     ),
     GlobalEstimate: st.builds(
-        GlobalEstimate, sender=names, t_s=finite, x=states, P=covariances(), beta=betas()
+        GlobalEstimate, sender=names, t_s=finite, x=states, P=covariances(), beta=betas(),
+        included_t_s=st.none() | st.dictionaries(vehicles, finite, max_size=5),
     ),
     MissionState: st.builds(
         MissionState,
@@ -101,7 +103,7 @@ def test_every_message_round_trips_exactly(message: Message) -> None:
     assert type(back) is type(message)
     assert encode(back) == payload
     wire = json.loads(payload)
-    assert wire["v"] == 1
+    assert wire["v"] == 2
     assert wire["kind"] == message.kind  # type: ignore[attr-defined]
 
 
@@ -147,7 +149,7 @@ def test_malformed_payloads_are_refused_naming_the_field(payload: bytes, where: 
     assert not isinstance(info.value, UnsupportedVersion)
 
 
-@pytest.mark.parametrize("version", [0, 2, "1", None])
+@pytest.mark.parametrize("version", [0, 1, 3, "2", None])
 def test_other_schema_versions_are_told_apart(version: object) -> None:
     with pytest.raises(UnsupportedVersion, match="schema version"):
         decode(_with(v=version))

@@ -317,8 +317,8 @@ async def test_garbage_is_dropped_counted_and_the_loop_goes_on(harness: Harness)
         b"\x00\xff\xfe garbage",
         b"{not json",
         b"[1, 2, 3]",
-        b'{"v": 1, "kind": "status"}',  # fields missing
-        b'{"v": 1, "kind": "teleport", "sender": "x", "t_s": 0}',  # unknown kind
+        b'{"v": 2, "kind": "status"}',  # fields missing
+        b'{"v": 2, "kind": "teleport", "sender": "x", "t_s": 0}',  # unknown kind
         encode(good).replace(b'"east_m":10.0', b'"east_m":NaN'),
         encode(good).replace(b'"east_m":10.0', b'"east_m":1e999'),
         encode(good).replace(b'"east_m":10.0', b'"east_m":"10.0"'),
@@ -328,7 +328,7 @@ async def test_garbage_is_dropped_counted_and_the_loop_goes_on(harness: Harness)
     async with harness.open() as bus, bus.subscribe(topics.ALL_STATUS) as sub:
         for payload in bad_payloads:
             await harness.inject_raw("standoff/v1/status/4", payload)
-        await harness.inject_raw("standoff/v1/status/4", encode(good).replace(b'"v":1', b'"v":2'))
+        await harness.inject_raw("standoff/v1/status/4", encode(good).replace(b'"v":2', b'"v":1'))
         await harness.inject_raw("standoff/v1/status/4", encode(good))
         assert await take(sub, 1) == [(topics.status(4), good)]
         assert bus.stats.malformed == len(bad_payloads)

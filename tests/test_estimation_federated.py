@@ -24,7 +24,13 @@ from app.core.estimation.linalg import is_spd
 from app.core.estimation.local import LocalParams, LocalState, local_step
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.core.estimation.models import MotionModel
-from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
+from app.core.estimation.pipeline import (
+    FederatedParams,
+    FederatedState,
+    federated_step,
+    run_centralised,
+    run_federated,
+)
 from app.errors import InputError
 
 
@@ -231,28 +237,118 @@ def test_a_late_allocation_replays_the_newer_observations():
     assert fed.counters == replace(state.counters, feedback=1)
 
 
-def test_an_estimate_delivered_after_a_fusion_it_missed_is_still_used():
-    """The main filter fused at t = 10 and holds its allocation copies at t = 10; an estimate
-    its sender made at 9.9 (after the one it sent at 9.8) arrives late: it is new information,
-    taken in place of the copy and carried to the next fusion, not dropped as out of order."""
+def test_an_estimate_built_on_the_last_allocation_replaces_the_copy_and_one_built_before_not():
+    """The main filter fused at t = 10 and holds its allocation copies at t = 10. An estimate
+    built on that allocation replaces the copy (its sender's clock may be a little behind);
+    one its sender made before it took the allocation is counted and dropped (its basis is
+    in the allocation already), and so is one older than its sender's newest."""
     params = MainParams(feedback="mixture")
     state = main_receive(MainState(), _estimate("a", np.zeros(6), np.eye(6), t=9.8))
     state = main_receive(state, _estimate("b", np.zeros(6), np.eye(6), t=9.8))
     fused = main_fuse(state, 10.0, params)
     assert fused is not None
+    assert dict(fused.included_t_s) == {"a": 9.8, "b": 9.8}
     state = main_allocate(state, fused, params)
     held = state.estimate_of("a")
     assert held is not None
-    assert held.t_s == 10.0  # the copy
+    assert (held.t_s, held.alloc_t_s) == (10.0, 10.0)  # the copy
     moved = np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    state = main_receive(state, _estimate("a", moved, np.eye(6), t=9.9))
-    assert state.out_of_order_dropped == 0
-    held = state.estimate_of("a")
-    assert held is not None
-    assert held.t_s == 9.9
+    state = main_receive(state, replace(_estimate("a", moved, np.eye(6), t=9.9), alloc_t_s=9.0))
+    assert state.stale_basis_dropped == 1
+    assert state.estimate_of("a") == held
+    built = replace(_estimate("a", moved, np.eye(6), t=9.95), alloc_t_s=10.0)
+    state = main_receive(state, built)
+    assert state.estimate_of("a") == built
     again = main_fuse(state, 10.1, params)
     assert again is not None
-    assert again.x[0] > 1.0  # the late estimate pulled the fused one east
-    # but one older than its sender's newest is still dropped
-    state = main_receive(state, _estimate("a", np.zeros(6), np.eye(6), t=9.85))
+    assert again.x[0] > 1.0  # the estimate built on the allocation pulled the fused one east
+    assert dict(again.included_t_s) == {"a": 9.95, "b": 9.8}
+    state = main_receive(state, replace(built, t_s=9.85))
     assert state.out_of_order_dropped == 1
+    assert state.stale_basis_dropped == 1
+
+
+def test_an_estimate_built_on_the_allocation_before_is_not_counted_twice():
+    """Over a bus, agent 1 makes an estimate before the last allocation reaches it: it holds
+    that allocation's predecessor and its observation at 15.0, both in the last allocation
+    already. Fused with the copies of the last allocation it would count them twice; the main
+    filter drops it and fuses exactly what the centralised filter would of the observations
+    it has (linear model), and once agent 1 takes the allocation and replays its observation,
+    exactly the centralised estimate of them all."""
+    model = MotionModel("ca", 0.01)
+    local = LocalParams(
+        imm=IMMParams((model,), np.eye(1)), init_speed_sigma_m_s=1e3, init_accel_sigma_m_s2=1e2
+    )
+    params = FederatedParams(local, MainParams(time_update=model, feedback="modewise"))
+    obs = _track(456)
+    fed = FederatedState()
+    for o in obs[:450]:  # feedback after every observation: all built on one allocation
+        fed, _, _ = federated_step(fed, o, params)
+    filters = {s.sensor: s for s in fed.locals}
+    main = fed.main
+
+    def observe(o: Observation) -> LocalEstimate:
+        filters[o.sensor], report = local_step(filters[o.sensor], o, local)
+        assert report.used
+        est = filters[o.sensor].estimate()
+        assert est is not None
+        return est
+
+    for o in obs[450:453]:  # sensors 1, 2, 3 at 15.0, 15.033, 15.067
+        main = main_receive(main, observe(o))
+    alloc = main_fuse(main, obs[452].t_s, params.main)
+    assert alloc is not None
+    main = main_allocate(main, alloc, params.main)
+    for s in ("2", "3"):  # the allocation reaches agents 2 and 3; agent 1's is on its way
+        filters[s] = apply_feedback(filters[s], alloc, local, params.main)
+    late_built = observe(obs[453])  # sensor 1 at 15.1, on the allocation before
+    main = main_receive(main, late_built)
+    assert main.stale_basis_dropped == 1
+    for o in obs[454:456]:  # sensors 2, 3 at 15.133, 15.167
+        main = main_receive(main, observe(o))
+    t = obs[455].t_s
+    fused = main_fuse(main, t, params.main)
+    assert fused is not None
+    central = run_centralised(obs[:453] + obs[454:456], local).fused
+    np.testing.assert_allclose(fused.x, central.x[-1], atol=1e-6)
+    np.testing.assert_allclose(fused.p, central.p[-1], atol=1e-6)
+
+    filters["1"] = apply_feedback(filters["1"], alloc, local, params.main)
+    rebuilt = filters["1"].estimate()
+    assert rebuilt is not None
+    assert rebuilt.alloc_t_s == alloc.t_s
+    main = main_receive(main, rebuilt)
+    fused = main_fuse(main, t, params.main)
+    assert fused is not None
+    central = run_centralised(obs[:456], local).fused
+    np.testing.assert_allclose(fused.x, central.x[-1], atol=1e-6)
+    np.testing.assert_allclose(fused.p, central.p[-1], atol=1e-6)
+
+
+def test_an_allocation_replays_the_observations_its_fusion_lacks_even_older_ones():
+    """A filter whose estimate at 1.0 was the last of its in the fusion at 1.05 replays its
+    observation at 1.02 (late to the allocation) on top: it is not in the fusion."""
+    imm = default_imm_params()
+    local = LocalParams(imm=imm)
+    main = MainParams(imm=imm)
+    state = LocalState("1")
+    for o in _track(90)[::3]:  # sensor 1, 0.0 .. 2.9 s every 0.1 s
+        if o.t_s > 1.0:
+            break
+        state, _ = local_step(state, o, local)
+    est = state.estimate()
+    assert est is not None
+    fused = fuse([est], 1.05, main)
+    assert fused is not None
+    fused = replace(fused, included_t_s=(("1", 1.0),))
+    state, _ = local_step(state, Observation(1.02, "1", 3.1, 21.0), local)
+    fed = apply_feedback(state, fused, local, main)
+    assert [o.t_s for o in fed.recent] == [1.02]
+    assert fed.alloc_t_s == 1.05
+    # the same allocation with no word of what it holds replays only what is newer than it
+    bare = apply_feedback(state, replace(fused, included_t_s=()), local, main)
+    assert bare.recent == ()
+    with_obs, without = fed.estimate(), bare.estimate()
+    assert with_obs is not None
+    assert without is not None
+    assert np.trace(with_obs.p[:4:2, :4:2]) < np.trace(without.p[:4:2, :4:2])

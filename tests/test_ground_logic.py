@@ -1,4 +1,5 @@
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -91,3 +92,39 @@ def test_bad_params_are_refused():
         GroundParams(vehicles=(0, 0), radius_m=90.0, tracking_command_t_s=0.0)
     with pytest.raises(ValueError, match="radius_m"):
         GroundParams(vehicles=(0,), radius_m=-1.0, tracking_command_t_s=0.0)
+
+
+def test_allocations_go_out_once_per_feedback_period_and_fusions_between_without_shares():
+    """The ground fuses every 0.2 s but allocates every 1 s: the fused estimates between go
+    out with no shares (nothing for the agents to take), and the main filter keeps fusing
+    its copies of the last allocation with estimates built on it."""
+    params = GroundParams(
+        vehicles=(0, 1, 2),
+        radius_m=90.0,
+        tracking_command_t_s=10.0,
+        main=MainParams(feedback="mixture"),
+        feedback_period_s=1.0,
+    )
+    state = GroundState()
+    shared = []
+    for k in range(11):
+        t = 0.1 * k
+        for v in (0, 1, 2):
+            state = hear_status(state, v, on_circle(t, v, 120.0 * v))
+            basis = None if state.main.shared is None else state.main.shared.t_s
+            state = hear_local(state, replace(local(v, t), alloc_t_s=basis))
+        state, fused, _ = tick(state, params)
+        if fused is not None:
+            shared.append((round(t, 1), bool(fused.beta)))
+    assert shared == [
+        (0.0, True),
+        (0.2, False),
+        (0.4, False),
+        (0.6, False),
+        (0.8, False),
+        (1.0, True),
+    ]
+    assert state.main.stale_basis_dropped == 0
+    # an estimate built before the last allocation is refused
+    state = hear_local(state, replace(local(0, 1.05), alloc_t_s=0.0))
+    assert state.main.stale_basis_dropped == 1

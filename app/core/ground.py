@@ -44,7 +44,11 @@ class VehicleReport:
 class GroundParams:
     """``vehicles``: the team as launched (ids). ``tracking_command_t_s``: when the team is
     sent from standby to track (mission time). ``fuse_period_s``: how often the main filter
-    fuses. ``lost_after_s``: mission-time silence after which a vehicle leaves the team.
+    fuses. ``feedback_period_s``: how often at most a fused estimate goes out as an
+    information allocation (the others go out with no shares, to steer by); longer than the
+    round trip to the agents, since the main filter drops the estimates built on the
+    allocation before the last (``main_receive``). ``lost_after_s``: mission-time silence
+    after which a vehicle leaves the team.
     ``coast_after_s``: once no local estimate has arrived for this long, the fused estimate is
     predicted with ``coast_model`` instead of fused (constant velocity: the acceleration last
     estimated is not extrapolated, which would take the predicted target off at ever higher
@@ -56,6 +60,7 @@ class GroundParams:
     main: MainParams = field(default_factory=MainParams)
     stages: StageParams = field(default_factory=StageParams)
     fuse_period_s: float = 0.2
+    feedback_period_s: float = 1.0
     lost_after_s: float = 2.0
     coast_after_s: float = 1.0
     coast_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
@@ -63,7 +68,13 @@ class GroundParams:
     def __post_init__(self) -> None:
         if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
             raise ValueError(f"vehicles must be unique and non-empty, got {self.vehicles}")
-        for name in ("radius_m", "fuse_period_s", "lost_after_s", "coast_after_s"):
+        for name in (
+            "radius_m",
+            "fuse_period_s",
+            "feedback_period_s",
+            "lost_after_s",
+            "coast_after_s",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -80,6 +91,7 @@ class GroundState:
     stage: StageState = field(default_factory=StageState)
     mission_t_s: float = -math.inf
     next_fuse_t_s: float = -math.inf
+    next_feedback_t_s: float = -math.inf
     last_local_t_s: float = -math.inf  # time of the newest local estimate received
 
     def report(self, vehicle: int) -> VehicleReport | None:
@@ -165,8 +177,9 @@ def tick(
 ) -> tuple[GroundState, GlobalEstimate | None, tuple[GroundEvent, ...]]:
     """At the current mission time: update the active team, fuse when due, advance the stage.
 
-    Returns the new state, the fused estimate to publish (None when not due or nothing to fuse)
-    and events (vehicles leaving or rejoining, stage changes).
+    Returns the new state, the fused estimate to publish (None when not due or nothing to fuse;
+    with no shares when it is not an allocation, see ``feedback_period_s``) and events
+    (vehicles leaving or rejoining, stage changes).
     """
     t = state.mission_t_s
     events: list[GroundEvent] = []
@@ -176,24 +189,31 @@ def tick(
     for v in set(active) - set(state.active):
         events.append(GroundEvent(t, "vehicle_joined", f"vehicle {v} is in the formation"))
     state = replace(state, active=active)
-    fused = None
+    fused = published = None
     if t >= state.next_fuse_t_s:
         if state.fused is not None and t - state.last_local_t_s > params.coast_after_s:
             fused = coast(state.fused, t, params.coast_model)
         else:
             fused = main_fuse(state.main, t, params.main)
-        main = state.main if fused is None else main_allocate(state.main, fused, params.main)
+        main, next_feedback, published = state.main, state.next_feedback_t_s, fused
+        if fused is not None:
+            if t >= next_feedback:
+                main = main_allocate(state.main, fused, params.main)
+                next_feedback = t + params.feedback_period_s
+            else:
+                published = replace(fused, beta=(), included_t_s=())
         state = replace(
             state,
             main=main,
             fused=fused if fused is not None else state.fused,
             next_fuse_t_s=t + params.fuse_period_s,
+            next_feedback_t_s=next_feedback,
         )
     commanded = t >= params.tracking_command_t_s
     new_stage = next_stage(state.stage, t, commanded, team_view(state, params), params.stages)
     if new_stage.stage is not state.stage.stage:
         events.append(GroundEvent(t, "stage", new_stage.stage.value))
-    return replace(state, stage=new_stage), fused, tuple(events)
+    return replace(state, stage=new_stage), published, tuple(events)
 
 
 def desired_spacing_rad(state: GroundState) -> float:

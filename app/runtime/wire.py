@@ -54,6 +54,7 @@ def local_to_bus(estimate: est.LocalEstimate, vehicle: int, sender: str) -> bus.
         x=_nested(estimate.x.tolist()),
         P=_nested(estimate.p.tolist()),
         q_scale=estimate.q_scale,
+        alloc_t_s=estimate.alloc_t_s,
         **_models(estimate.mu, estimate.model_x, estimate.model_p),
     )
 
@@ -67,6 +68,7 @@ def local_to_core(message: bus.LocalEstimate) -> est.LocalEstimate:
         p=np.array(message.P),
         mu=models.pop("mu", np.zeros(0)),
         q_scale=message.q_scale,
+        alloc_t_s=message.alloc_t_s,
         **models,
     )
 
@@ -78,6 +80,7 @@ def global_to_bus(estimate: est.GlobalEstimate, sender: str) -> bus.GlobalEstima
         x=_nested(estimate.x.tolist()),
         P=_nested(estimate.p.tolist()),
         beta={int(sensor): share for sensor, share in estimate.beta if share > 0.0},
+        included_t_s={int(sensor): t for sensor, t in estimate.included_t_s} or None,
         **_models(estimate.mu, estimate.model_x, estimate.model_p),
     )
 
@@ -88,5 +91,6 @@ def global_to_core(message: bus.GlobalEstimate) -> est.GlobalEstimate:
         x=np.array(message.x),
         p=np.array(message.P),
         beta=tuple((str(v), share) for v, share in sorted(message.beta.items())),
+        included_t_s=tuple((str(v), t) for v, t in sorted((message.included_t_s or {}).items())),
         **_arrays(message),
     )

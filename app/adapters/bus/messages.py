@@ -1,8 +1,10 @@
-"""The bus's message schemas (version 1): frozen pydantic models that validate on construction.
+"""The bus's message schemas (version 2): frozen pydantic models that validate on construction.
 
 Every message carries the schema version ``v``, its ``kind``, the ``sender`` (a client name)
 and ``t_s``, the mission time in seconds that its content refers to. Numbers must be finite.
 The target state order is [east, v_east, north, v_north, a_east, a_north] (m, m/s, m/s^2).
+Version 2 added ``alloc_t_s`` to ``estimate.local`` and ``included_t_s`` to ``estimate.global``
+(which allocation a local estimate is built on; docs/bus.md).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 STATE_DIM = 6
 STATE_ORDER = ("east_m", "v_east_m_s", "north_m", "v_north_m_s", "a_east_m_s2", "a_north_m_s2")
 
@@ -43,7 +45,7 @@ class Message(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    v: Literal[1] = 1
+    v: Literal[2] = 2
     sender: Name
     t_s: Finite
 
@@ -115,6 +117,8 @@ class LocalEstimate(Message):
     mu: Probabilities | None = None
     model_x: ModelStates | None = None
     model_P: ModelCovariances | None = None
+    # the time of the fused estimate whose allocation the local filter last took (None: none)
+    alloc_t_s: Finite | None = None
 
     @model_validator(mode="after")
     def _covariance(self) -> Self:
@@ -154,6 +158,9 @@ class GlobalEstimate(Message):
     mu: Probabilities | None = None
     model_x: ModelStates | None = None
     model_P: ModelCovariances | None = None
+    # per vehicle given a share: the time of its newest own estimate in the fusion (its
+    # observations after it are not in; it replays them on top of the allocation)
+    included_t_s: dict[VehicleId, Finite] | None = None
 
     @model_validator(mode="after")
     def _check(self) -> Self:

@@ -91,6 +91,11 @@ class MainState:
     received_t: tuple[tuple[str, float], ...] = ()
     """The time of the newest estimate each sensor itself sent (``latest`` may hold the main
     filter's allocation copy instead, at the fusion's time)."""
+    allocated_t: tuple[tuple[str, float], ...] = ()
+    """The time of the allocation last given to each sensor (the basis its estimates must
+    declare to be fused)."""
+    stale_basis_dropped: int = 0
+    """Estimates refused because they were built on an older allocation than the last one."""
 
     def estimate_of(self, sensor: str) -> LocalEstimate | None:
         for est in self.latest:
@@ -110,11 +115,23 @@ def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
     fusion's time there. Refusing it, as a comparison with the copy's time would, leaves the
     main filter fusing its own copies, coasting on the old velocity while the target turns,
     whenever the estimates arrive later than the fusion runs (the multi-process mission, where
-    each agent stamps its estimates with its own vehicle's time)."""
+    each agent stamps its estimates with its own vehicle's time).
+
+    An estimate built on an older allocation than the last one given to its sender
+    (``alloc_t_s`` older) is counted and dropped: the newer allocation
+    already holds that allocation's information and the sender's observations up to its
+    estimate then, and the main filter's copies of the other filters are shares of it, so
+    fusing it with them would count both twice. Nothing is lost: the sender replays its
+    observations after ``GlobalEstimate.included_t_s`` when the allocation reaches it. An
+    estimate with no basis (``alloc_t_s`` None: its filter never took an allocation) is taken
+    as before; only the first allocation's round trip can then count observations twice."""
     sent = dict(state.received_t)
     last = sent.get(estimate.sensor)
     if last is not None and estimate.t_s < last:
         return replace(state, out_of_order_dropped=state.out_of_order_dropped + 1)
+    basis = dict(state.allocated_t).get(estimate.sensor)
+    if basis is not None and estimate.alloc_t_s is not None and estimate.alloc_t_s < basis:
+        return replace(state, stale_basis_dropped=state.stale_basis_dropped + 1)
     sent[estimate.sensor] = estimate.t_s
     others = tuple(e for e in state.latest if e.sensor != estimate.sensor)
     return replace(
@@ -245,23 +262,35 @@ def _fuse_modewise(
 
 
 def main_fuse(state: MainState, t_s: float, params: MainParams) -> GlobalEstimate | None:
-    """Fuse the main filter's newest local estimates at ``t_s``."""
-    return fuse(state.latest, t_s, params, state.shared)
+    """Fuse the main filter's newest local estimates at ``t_s``; the result says up to when
+    each fused sensor's own estimates are in it (``included_t_s``)."""
+    fused = fuse(state.latest, t_s, params, state.shared)
+    if fused is None:
+        return None
+    sent = dict(state.received_t)
+    included = tuple((s, sent[s]) for s, _ in fused.beta if s in sent)
+    return replace(fused, included_t_s=included)
 
 
 def main_allocate(state: MainState, fused: GlobalEstimate, params: MainParams) -> MainState:
     """The main filter's copy of each local filter after the information allocation it sent:
     (X_g, beta_i^-1 P_g) at the fused time, so that the next fusion counts the shared
-    information once. With feedback ``"none"`` the state is returned as is."""
+    information once; from now on it takes only estimates built on this allocation from the
+    filters given a share. With feedback ``"none"`` the state is returned as is.
+
+    An estimate newer than the fused time is replaced too: it is in the fusion, and its
+    sender replays its observations after ``included_t_s`` on top of the allocation."""
     if params.feedback == "none":
         return state
     shares = dict(fused.beta)
+    allocated = dict(state.allocated_t)
     latest = []
     for est in state.latest:
         beta = shares.get(est.sensor)
-        if beta is None or beta <= 0.0 or est.t_s > fused.t_s:
+        if beta is None or beta <= 0.0:
             latest.append(est)
             continue
+        allocated[est.sensor] = fused.t_s
         scale = 1.0 / beta if params.scale_process_noise else 1.0
         if fused.model_x is not None and fused.model_p is not None and fused.mu is not None:
             copy = LocalEstimate(
@@ -273,11 +302,16 @@ def main_allocate(state: MainState, fused: GlobalEstimate, params: MainParams) -
                 scale,
                 model_x=fused.model_x,
                 model_p=fused.model_p / beta,
+                alloc_t_s=fused.t_s,
             )
         else:
-            copy = LocalEstimate(est.sensor, fused.t_s, fused.x, fused.p / beta, est.mu, scale)
+            copy = LocalEstimate(
+                est.sensor, fused.t_s, fused.x, fused.p / beta, est.mu, scale, alloc_t_s=fused.t_s
+            )
         latest.append(copy)
-    return replace(state, latest=tuple(latest), shared=fused)
+    return replace(
+        state, latest=tuple(latest), shared=fused, allocated_t=tuple(sorted(allocated.items()))
+    )
 
 
 def apply_feedback(
@@ -288,8 +322,10 @@ def apply_feedback(
 ) -> LocalState:
     """Information allocation (Appendix A (1)) to one local filter, per ``main_params.feedback``.
 
-    ``"modewise"``: the local filter takes the fused models' shares and mode probabilities; if
-    it has used observations newer than the fused time, they are replayed on top. ``"reset"`` and
+    ``"modewise"``: the local filter takes the fused models' shares and mode probabilities; the
+    observations it has used that the fusion lacks (newer than its newest estimate in the
+    fusion, ``fused.included_for``) are replayed on top, and its estimates from now on declare
+    this allocation as their basis (``alloc_t_s``). ``"reset"`` and
     ``"mixture"``: the local filter is first brought to the fused time (an IMM prediction), or
     the fused estimate is carried forward with the time-update model if the filter is past it.
     A filter that was not part of the fusion (no share), or mode ``"none"``, is returned as is.
@@ -309,10 +345,12 @@ def apply_feedback(
         new_imm = IMMState(
             fused.t_s, np.array(fused.model_x), np.asarray(fused.model_p) / beta, fused.mu, scale
         )
-        newer = tuple(o for o in local.recent if o.t_s > fused.t_s)
+        since = fused.included_for(local.sensor)
+        newer = tuple(o for o in local.recent if o.t_s > since)
         if newer:
-            # the allocation predates observations this filter has used: take the allocation
-            # and replay them on top (counted once, when they first came)
+            # the allocation lacks observations this filter has used: take the allocation and
+            # replay them on top (counted once); those older than the allocation are late
+            # observations to it (local_step's carry-forward)
             replayed = LocalState(local.sensor, new_imm)
             for obs in sorted(newer, key=lambda o: o.t_s):
                 replayed, _ = local_step(replayed, obs, local_params)
@@ -321,7 +359,7 @@ def apply_feedback(
         if new_imm.t_s < imm.t_s:
             new_imm = imm_predict(new_imm, imm.t_s, local_params.imm)
         counters = replace(local.counters, feedback=local.counters.feedback + 1)
-        return replace(local, imm=new_imm, counters=counters, recent=newer)
+        return replace(local, imm=new_imm, counters=counters, recent=newer, alloc_t_s=fused.t_s)
     x_g, p_g = np.asarray(fused.x), np.asarray(fused.p)
     if imm.t_s < fused.t_s:
         imm = imm_predict(imm, fused.t_s, local_params.imm)
@@ -342,4 +380,4 @@ def apply_feedback(
         ps = symmetrise(t @ imm.p @ t.T)
     new_imm = IMMState(imm.t_s, xs, ps, imm.mu, scale)
     counters = replace(local.counters, feedback=local.counters.feedback + 1)
-    return replace(local, imm=new_imm, counters=counters)
+    return replace(local, imm=new_imm, counters=counters, alloc_t_s=fused.t_s)

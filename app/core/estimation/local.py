@@ -125,6 +125,11 @@ class LocalState:
     recent
         The last few observations this filter used (at most ``RECENT_KEPT``), so that a
         federated allocation older than the filter can be applied and these replayed on top.
+    alloc_t_s
+        The time of the fused estimate whose allocation this filter last took (``None``
+        before any); its estimates say so, so that the main filter fuses them only with
+        copies of that allocation. A track restart keeps it (the restarted filter holds less
+        than the allocation, never more).
     """
 
     sensor: str
@@ -132,6 +137,7 @@ class LocalState:
     counters: FilterCounters = field(default_factory=FilterCounters)
     consecutive_gated: int = 0
     recent: tuple[Observation, ...] = ()
+    alloc_t_s: float | None = None
 
     @property
     def t_s(self) -> float | None:
@@ -144,7 +150,15 @@ class LocalState:
         imm = self.imm
         x, p = imm.combined()
         return LocalEstimate(
-            self.sensor, imm.t_s, x, p, imm.mu, imm.cov_scale, model_x=imm.x, model_p=imm.p
+            self.sensor,
+            imm.t_s,
+            x,
+            p,
+            imm.mu,
+            imm.cov_scale,
+            model_x=imm.x,
+            model_p=imm.p,
+            alloc_t_s=self.alloc_t_s,
         )
 
 

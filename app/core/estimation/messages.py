@@ -128,6 +128,10 @@ class LocalEstimate:
     model_x, model_p
         The model-conditioned means (r, 6) and covariances (r, 6, 6) behind ``x`` and ``p``
         (the main filter fuses them model by model in the ``"modewise"`` design).
+    alloc_t_s
+        The basis: the time of the fused estimate whose information allocation the local filter
+        last took (``None`` before any). The main filter fuses an estimate only with copies of
+        the allocation it is built on.
     """
 
     sensor: str
@@ -138,6 +142,7 @@ class LocalEstimate:
     q_scale: float = 1.0
     model_x: FloatArray | None = None
     model_p: FloatArray | None = None
+    alloc_t_s: float | None = None
 
     def __post_init__(self) -> None:
         _freeze_fields(self, ("x", "p", "mu", "model_x", "model_p"))
@@ -157,6 +162,8 @@ class LocalEstimate:
         if self.model_x is not None and self.model_p is not None:
             out["model_x"] = self.model_x.tolist()
             out["model_p"] = self.model_p.tolist()
+        if self.alloc_t_s is not None:
+            out["alloc_t_s"] = self.alloc_t_s
         return out
 
     @classmethod
@@ -174,6 +181,9 @@ class LocalEstimate:
             if "q_scale" in raw
             else 1.0,
             **_models_from(raw, kind, max(n_mu, 0)),
+            alloc_t_s=_finite(_number(raw, "alloc_t_s", kind), "alloc_t_s", kind)
+            if raw.get("alloc_t_s") is not None
+            else None,
         )
 
 
@@ -194,6 +204,10 @@ class GlobalEstimate:
     mu, model_x, model_p
         Fused mode probabilities (r,) and model-conditioned means (r, 6) and covariances
         (r, 6, 6), when the fusion was model by model (else ``None``).
+    included_t_s
+        For each fused local filter, the time of its newest own estimate in the fusion: its
+        observations after that time are not in, and it replays them on top of its allocation.
+        A filter not listed replays those after ``t_s``.
     """
 
     t_s: float
@@ -203,10 +217,14 @@ class GlobalEstimate:
     mu: FloatArray | None = None
     model_x: FloatArray | None = None
     model_p: FloatArray | None = None
+    included_t_s: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         _freeze_fields(self, ("x", "p", "mu", "model_x", "model_p"))
         object.__setattr__(self, "beta", tuple((str(k), float(v)) for k, v in self.beta))
+        object.__setattr__(
+            self, "included_t_s", tuple((str(k), float(v)) for k, v in self.included_t_s)
+        )
         if self.mu is not None:
             _check_models(self.mu, self.model_x, self.model_p)
 
@@ -224,6 +242,10 @@ class GlobalEstimate:
         """This sensor's share, or None if it was not part of the fusion."""
         return dict(self.beta).get(sensor)
 
+    def included_for(self, sensor: str) -> float:
+        """The time after which this sensor's observations are not in the fusion."""
+        return dict(self.included_t_s).get(sensor, self.t_s)
+
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "t_s": self.t_s,
@@ -235,6 +257,8 @@ class GlobalEstimate:
             out["mu"] = self.mu.tolist()
             out["model_x"] = self.model_x.tolist()
             out["model_p"] = self.model_p.tolist()
+        if self.included_t_s:
+            out["included_t_s"] = dict(self.included_t_s)
         return out
 
     @classmethod
@@ -252,6 +276,13 @@ class GlobalEstimate:
             n_mu = len(mu_raw) if isinstance(mu_raw, list) else -1
             extra = {"mu": _array(raw, "mu", kind, (max(n_mu, 0),))}
             extra.update(_models_from(raw, kind, max(n_mu, 0)))
+        included_raw = raw.get("included_t_s", {})
+        if not isinstance(included_raw, Mapping):
+            raise InputError(f"{kind}: field 'included_t_s' must be a mapping of sensor to time")
+        extra["included_t_s"] = tuple(
+            (str(k), _finite(_number(included_raw, k, kind), f"included_t_s.{k}", kind))
+            for k in included_raw
+        )
         return cls(
             t_s=_finite(_number(raw, "t_s", kind), "t_s", kind),
             x=_array(raw, "x", kind, (STATE_DIM,)),
