@@ -234,7 +234,9 @@ class GroundStation:
             segment = self._truth.segment_at(t)
             target = (truth.east_m, truth.north_m, truth.v_east_m_s, truth.v_north_m_s)
         elif estimate is not None:
-            segment, target = "estimated", estimate
+            # no truth: the orbit is scored about the estimate, which has nothing to be scored
+            # against itself (an estimation error here would read 0)
+            segment, target, estimate = "estimated", estimate, None
         else:
             return None
         vehicles = []

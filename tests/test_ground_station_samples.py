@@ -1,0 +1,49 @@
+"""What the ground station records each tick (``GroundStation`` samples), without I/O."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from app.adapters.bus import InProcessBroker, open_bus
+from app.config import load_config
+from app.core.estimation.messages import GlobalEstimate
+from app.core.ground import VehicleReport
+from app.mission_config import MissionConfig
+from app.runtime.ground import GroundRuntimeParams, GroundStation
+from app.runtime.mission import build_plan
+
+
+class Events:
+    def emit(self, kind: str, t_s: float, **fields: object) -> None:
+        pass
+
+
+@pytest.mark.parametrize("with_truth", [True, False])
+async def test_a_sample_scores_the_estimate_only_against_a_truth(with_truth: bool) -> None:
+    plan = build_plan(load_config("test-short", MissionConfig))
+    async with open_bus(None, client_id="ground", broker=InProcessBroker()) as bus:
+        station = GroundStation(
+            plan.ground,
+            GroundRuntimeParams(end_t_s=plan.end_t_s),
+            bus,
+            Events(),
+            truth=plan.target if with_truth else None,
+        )
+        fused = GlobalEstimate(
+            10.0, np.array([5.0, 0.0, -3.0, 0.0, 0.0, 0.0]), np.eye(6), (("0", 1.0),)
+        )
+        report = VehicleReport(10.0, 90.0, 0.0, 0.0, 14.0)
+        station.state = replace(station.state, fused=fused, reports=((0, report),), active=(0,))
+        sample = station._sample(10.0)
+    assert sample is not None
+    if with_truth:
+        truth = plan.target.state_at(10.0)
+        assert (sample.target_east_m, sample.target_north_m) == (truth.east_m, truth.north_m)
+        assert sample.estimate == pytest.approx((5.0, -3.0, 0.0, 0.0))
+    else:
+        # no truth (external vehicles, their own cameras): the orbit is scored about the
+        # estimate, and there is no estimation error to report (it would read 0)
+        assert sample.target_segment == "estimated"
+        assert (sample.target_east_m, sample.target_north_m) == pytest.approx((5.0, -3.0))
+        assert sample.estimate is None
