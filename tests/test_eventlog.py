@@ -1,6 +1,8 @@
 import json
 import math
 
+import pytest
+
 from app.adapters.eventlog import EventLog
 
 
@@ -21,3 +23,24 @@ def test_events_are_json_lines_with_counts(tmp_path):
     }
     assert lines[2]["spacing"] == [0.1, "inf"]
     assert log.counts == {"stage": 2, "observation_dropped": 1}
+
+
+def test_repeated_drops_are_written_once_per_window_with_a_count(tmp_path):
+    path = tmp_path / "events.jsonl"
+    with EventLog(path) as log:
+        for k in range(100):  # 10 s of one vehicle's camera at 10 Hz, all invalid
+            reason = f"position ({k}e6, 0) m is beyond 1e6 m of the origin"
+            log.emit("observation_dropped", 0.1 * k, vehicle=0, outcome="invalid", reason=reason)
+        log.emit("observation_dropped", 9.95, vehicle=1, outcome="invalid", reason="x")
+        log.emit("stage", 5.0, stage="track")  # other kinds are never held back
+        log.emit("stage", 5.1, stage="track")
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    drops = [(e["t_s"], e["vehicle"], e.get("repeats")) for e in lines if e["kind"] != "stage"]
+    # the first, the first after 5 s (49 held back before it), vehicle 1's own, and on closing
+    # the last one held back (t = 9.9 s, with the 48 before it)
+    assert drops[:3] == [(0.0, 0, None), (5.0, 0, 49), (9.95, 1, None)]
+    assert drops[3][1:] == (0, 48)
+    assert drops[3][0] == pytest.approx(9.9)
+    assert sum(e["kind"] == "stage" for e in lines) == 2
+    # the counts count every event, written or held back
+    assert log.counts == {"observation_dropped": 101, "stage": 2}

@@ -2,6 +2,13 @@
 
 Every event carries the vehicle time ``t_s`` it refers to, a ``kind`` and its own fields; the
 log also counts events per kind, which the run summary reports.
+
+Kinds that can come at the sensor or setpoint rate for as long as their cause lasts (a camera
+that keeps reporting nonsense, a vehicle that refuses every speed command) are written once per
+``REPEAT_WINDOW_S`` of event time for each of their keys (``REPEATED_KINDS``); the next line
+written for that key says in ``repeats`` how many were held back before it, and closing the log
+writes the last one held back of each key (with the rest in its ``repeats``). The counts count
+them all.
 """
 
 import json
@@ -9,7 +16,15 @@ import math
 from collections import Counter
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Self
+from typing import IO, Final, Self
+
+#: event time (s) within which a repeated event of one key is written once
+REPEAT_WINDOW_S: Final = 5.0
+#: the kinds written once per window, with the fields that tell their repeats apart
+REPEATED_KINDS: Final = {
+    "observation_dropped": ("vehicle", "outcome"),
+    "command_refused": ("vehicle", "reason"),
+}
 
 
 def _plain(value: object) -> object:
@@ -30,6 +45,8 @@ class EventLog:
         self._path = path
         self._file: IO[str] | None = None
         self.counts: Counter[str] = Counter()
+        #: per repeated key: event time last written, events held back since, the last of them
+        self._repeats: dict[tuple[object, ...], tuple[float, int, dict[str, object]]] = {}
 
     def __enter__(self) -> Self:
         self._path.parent.mkdir(parents=True, exist_ok=True)
@@ -43,6 +60,9 @@ class EventLog:
         tb: TracebackType | None,
     ) -> None:
         if self._file is not None:
+            for _, held, record in self._repeats.values():
+                if held:
+                    self._write(record | ({"repeats": held - 1} if held > 1 else {}))
             self._file.close()
             self._file = None
 
@@ -52,5 +72,19 @@ class EventLog:
         if self._file is None:
             return
         record = {"t_s": _plain(t_s), "kind": kind, **{k: _plain(v) for k, v in fields.items()}}
+        key_fields = REPEATED_KINDS.get(kind)
+        if key_fields is not None:
+            key = (kind, *(str(fields.get(name)) for name in key_fields))
+            last = self._repeats.get(key)
+            if last is not None and 0.0 <= t_s - last[0] < REPEAT_WINDOW_S:
+                self._repeats[key] = (last[0], last[1] + 1, record)
+                return
+            self._repeats[key] = (t_s, 0, record)
+            if last is not None and last[1]:
+                record = record | {"repeats": last[1]}
+        self._write(record)
+
+    def _write(self, record: dict[str, object]) -> None:
+        assert self._file is not None
         self._file.write(json.dumps(record, default=str) + "\n")
         self._file.flush()
