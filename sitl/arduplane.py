@@ -58,11 +58,17 @@ PARAM_SYSID_MYGCS: Final = "SYSID_MYGCS"  # AP_Int16, default 255: whose heartbe
 PARAM_FS_GCS_ENABL: Final = "FS_GCS_ENABL"  # AP_Int8: 0 off, 1 heartbeat, 2 + REMRSSI, 3 AUTO only
 PARAM_FS_LONG_ACTN: Final = "FS_LONG_ACTN"  # AP_Int8: 0 continue, 1 RTL, 2 glide, 3 parachute, ...
 PARAM_FS_LONG_TIMEOUT: Final = "FS_LONG_TIMEOUT"  # AP_Float, s
+# the airspeed range GUIDED_CHANGE_SPEED accepts (aparm.airspeed_min / _max, AP_Int16, m/s;
+# named ARSPD_FBW_MIN / _MAX before ArduPilot 4.5): the vehicle's speed limits
+PARAM_AIRSPEED_MIN: Final = "AIRSPEED_MIN"
+PARAM_AIRSPEED_MAX: Final = "AIRSPEED_MAX"
 PARAM_TYPES: Final = {
     PARAM_SYSID_MYGCS: mavlink.MAV_PARAM_TYPE_INT16,
     PARAM_FS_GCS_ENABL: mavlink.MAV_PARAM_TYPE_INT8,
     PARAM_FS_LONG_ACTN: mavlink.MAV_PARAM_TYPE_INT8,
     PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MIN: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_AIRSPEED_MAX: mavlink.MAV_PARAM_TYPE_INT16,
 }
 # ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (libraries/GCS_MAVLink/GCS.cpp, default
 # 255) and added MAV_GCS_SYSID_HI (default 0): when HI >= MAV_GCS_SYSID every system id from
@@ -75,6 +81,8 @@ PARAM_TYPES_4_7: Final = {
     PARAM_FS_GCS_ENABL: mavlink.MAV_PARAM_TYPE_INT8,
     PARAM_FS_LONG_ACTN: mavlink.MAV_PARAM_TYPE_INT8,
     PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MIN: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_AIRSPEED_MAX: mavlink.MAV_PARAM_TYPE_INT16,
 }
 _INT_RANGES: Final = {
     mavlink.MAV_PARAM_TYPE_INT8: (-128, 127),
@@ -221,7 +229,8 @@ class ArduPlaneVehicle(SimVehicle):
     loiters 200 m ahead at its altitude, staying in TAKEOFF. GUIDED flies, from the moment it
     is entered, a loiter where it is until MAV_CMD_GUIDED_CHANGE_HEADING gives it a course over
     ground; the guided targets last until the mode changes. It takes no offboard setpoints.
-    ``params`` holds the four failsafe parameters (``PARAM_TYPES``), read live by the failsafe.
+    ``params`` holds the failsafe parameters and the airspeed range (``PARAM_TYPES``), read
+    live by the failsafe and GUIDED_CHANGE_SPEED.
     """
 
     def __init__(
@@ -253,6 +262,9 @@ class ArduPlaneVehicle(SimVehicle):
                 FS_ACTION_LONG_RTL if failsafe == "return" else FS_ACTION_LONG_CONTINUE
             ),
             PARAM_FS_LONG_TIMEOUT: self._sim.gcs_failsafe_timeout_s,
+            # whole m/s (AP_Int16) within the vehicle's own speed range
+            PARAM_AIRSPEED_MIN: float(math.ceil(self.config.limits.min_speed_m_s)),
+            PARAM_AIRSPEED_MAX: float(math.floor(self.config.limits.max_speed_m_s)),
         }
         #: parameters whose PARAM_SET is refused as ArduPilot refuses one it may not take over
         #: MAVLink (``allow_set_via_mavlink`` false): "Param write denied" and the old value
@@ -510,8 +522,9 @@ class ArduPlaneVehicle(SimVehicle):
             if _as_int(p[0], -1) != SPEED_TYPE_AIRSPEED:
                 return denied
             speed, accel = p[1], p[2]
-            limits = self.config.limits
-            if not (math.isfinite(speed) and limits.min_speed_m_s <= speed <= limits.max_speed_m_s):
+            low = self.params[PARAM_AIRSPEED_MIN]
+            high = self.params[PARAM_AIRSPEED_MAX]
+            if not (math.isfinite(speed) and low <= speed <= high):
                 return int(mavlink.MAV_RESULT_FAILED)  # outside AIRSPEED_MIN..AIRSPEED_MAX
             self._guided_speed_m_s = speed
             accel = abs(accel) if math.isfinite(accel) else 0.0

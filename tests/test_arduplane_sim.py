@@ -242,6 +242,8 @@ def test_failsafe_parameters_are_served_as_arduplane_serves_them():
         ("FS_GCS_ENABL", 0.0, INT8, 1),
         ("FS_LONG_ACTN", 0.0, INT8, 2),
         ("FS_LONG_TIMEOUT", 5.0, REAL32, 3),
+        ("AIRSPEED_MIN", 12.0, INT16, 4),  # the vehicle's speed range, whole m/s
+        ("AIRSPEED_MAX", 24.0, INT16, 5),
     ]
     by_name = mavlink.MAVLink_param_request_read_message(1, 1, b"SYSID_MYGCS", -1)
     assert param_values(v.handle(wire(by_name), 0.0, 0.0)) == [("SYSID_MYGCS", 255.0, INT16, 65535)]
@@ -369,11 +371,13 @@ async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_re
     async with asyncio.timeout(40.0), running_sim(config) as sim:
         vehicle = sim.vehicles[0]
         assert isinstance(vehicle, ArduPlaneVehicle)
+        vehicle.params["AIRSPEED_MAX"] = 30.0  # so that the mission's 12-30 m/s is taken
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
             hub.link(1, LinkConfig(wide)) as link,
         ):
             await link.wait_ready(10.0)
+            vehicle.params["AIRSPEED_MAX"] = 24.0  # and then narrowed behind its back
             await link.arm()
             await link.take_off(10.0)
             vehicle.gcs_blocked_modes = frozenset({15})  # FLTMODE_GCSBLOCK: no GUIDED from a GCS
@@ -381,10 +385,25 @@ async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_re
                 await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
             vehicle.gcs_blocked_modes = frozenset()
             await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
-            # 28 m/s is within the app's limits but above the vehicle's AIRSPEED_MAX (24)
+            # 28 m/s is within the app's limits but above the vehicle's AIRSPEED_MAX (now 24)
             with pytest.raises(LinkError, match="GUIDED_CHANGE_SPEED refused: MAV_RESULT_FAILED"):
                 await link.send(CourseSpeedCommand(0.0, 28.0))
             assert vehicle.guided_targets[1] == 18.0
+
+
+async def test_a_mission_faster_than_the_airspeed_range_is_refused_before_take_off():
+    config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")  # AIRSPEED 12-24 m/s
+    wide = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+    async with asyncio.timeout(30.0), running_sim(config) as sim:
+        async with (
+            MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+            hub.link(1, LinkConfig(wide)) as link,
+        ):
+            with pytest.raises(
+                LinkError, match=r"takes airspeeds of 12-24 m/s only \(AIRSPEED_MIN, AIRSPEED_MAX\)"
+            ):
+                await link.wait_ready(10.0)
+        assert not sim.truth().vehicles[0].armed
 
 
 async def test_leaving_guided_by_someone_else_is_reported():

@@ -80,11 +80,11 @@ class ParamRecorder:
 
     def __init__(
         self,
-        values: dict[str, int],
+        values: dict[str, int | float],
         fail: ParamResult | None = None,
         refuse: dict[str, ParamResult] | None = None,
     ) -> None:
-        self.values = dict(values)
+        self.values: dict[str, int | float] = dict(values)
         self.sets: list[tuple[str, int]] = []
         self.fail = fail
         self.refuse = refuse or {}
@@ -94,7 +94,19 @@ class ParamRecorder:
             raise ParamError(self.fail, "get_param_int()", name)
         if name not in self.values:  # ArduPilot does not answer for a name it does not have
             raise ParamError(ParamResult.TIMEOUT, "get_param_int()", name)
-        return self.values[name]
+        value = self.values[name]
+        if isinstance(value, float):  # stored as a float: MAVSDK will not read it as an int
+            raise ParamError(ParamResult.WRONG_TYPE, "get_param_int()", name)
+        return value
+
+    async def get_param_float(self, name: str) -> float:
+        if self.fail is not None:
+            raise ParamError(self.fail, "get_param_float()", name)
+        value = self.values.get(name)
+        if not isinstance(value, float):
+            result = ParamResult.TIMEOUT if value is None else ParamResult.WRONG_TYPE
+            raise ParamError(result, "get_param_float()", name)
+        return value
 
     async def set_param_int(self, name: str, value: int) -> None:
         self.sets.append((name, value))
@@ -404,7 +416,14 @@ async def test_px4_parameter_failure_is_a_link_error():
 
 # ---- ArduPlane -------------------------------------------------------------------------------
 
-STOCK_ARDUPLANE = {"SYSID_MYGCS": 255, "FS_GCS_ENABL": 0, "FS_LONG_ACTN": 0}
+# ArduPlane's defaults (the airspeed range: 9-22 m/s, AP_Int16)
+STOCK_ARDUPLANE: dict[str, int | float] = {
+    "SYSID_MYGCS": 255,
+    "FS_GCS_ENABL": 0,
+    "FS_LONG_ACTN": 0,
+    "AIRSPEED_MIN": 9,
+    "AIRSPEED_MAX": 22,
+}
 
 
 def arduplane(
@@ -427,7 +446,11 @@ async def test_arduplane_makes_a_stock_gcs_failsafe_return_it_and_says_so(caplog
     with caplog.at_level("WARNING"):
         await arduplane(params=params).prepare()
     assert params.sets == [("SYSID_MYGCS", 245), ("FS_GCS_ENABL", 1), ("FS_LONG_ACTN", 1)]
-    assert params.values == {"SYSID_MYGCS": 245, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1}
+    assert params.values == STOCK_ARDUPLANE | {
+        "SYSID_MYGCS": 245,
+        "FS_GCS_ENABL": 1,
+        "FS_LONG_ACTN": 1,
+    }
     changes = [r.getMessage() for r in caplog.records]
     assert changes[0].startswith("vehicle 5: set SYSID_MYGCS from 255 to 245 so that")
     assert changes[1].startswith("vehicle 5: set FS_GCS_ENABL from 0 to 1 so that")
@@ -572,3 +595,36 @@ async def test_arduplane_takes_off_in_takeoff_mode():
         1.0,
         13.0,
     )
+
+
+@pytest.mark.parametrize(
+    "airspeeds",
+    [
+        {"AIRSPEED_MIN": 9, "AIRSPEED_MAX": 22},
+        {"AIRSPEED_MIN": 9.0, "AIRSPEED_MAX": 22.0},  # a build that stores them as floats
+        {"ARSPD_FBW_MIN": 9, "ARSPD_FBW_MAX": 22},  # their names before ArduPilot 4.5
+    ],
+)
+async def test_arduplane_takes_a_mission_within_its_airspeed_range(airspeeds):
+    params = ParamRecorder({"SYSID_MYGCS": 245, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1} | airspeeds)
+    await arduplane(params=params).prepare()  # 10-18 m/s within 9-22
+    assert params.sets == []
+
+
+async def test_arduplane_whose_airspeed_range_misses_the_missions_speeds_is_refused():
+    values = STOCK_ARDUPLANE | {"AIRSPEED_MIN": 12}
+    params = ParamRecorder(values)
+    with pytest.raises(
+        LinkError,
+        match=r"vehicle 5: the mission commands 10-18 m/s, but this ArduPlane takes airspeeds of "
+        r"12-22 m/s only \(AIRSPEED_MIN, AIRSPEED_MAX\)",
+    ):
+        await arduplane(params=params).prepare()
+    assert params.sets == []  # refused before anything was changed
+
+
+async def test_arduplane_with_an_unreadable_airspeed_range_is_warned_about(caplog):
+    values: dict[str, int | float] = {"SYSID_MYGCS": 245, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1}
+    with caplog.at_level("WARNING"):
+        await arduplane(params=ParamRecorder(values)).prepare()
+    assert "its airspeed range (AIRSPEED_MIN, AIRSPEED_MAX) cannot be read" in caplog.text

@@ -265,8 +265,10 @@ async def test_a_mode_change_by_someone_else_is_reported_as_leaving_offboard():
 async def test_a_refused_mode_change_is_a_link_error_with_the_result():
     config = sim_config(1, speedup=SPEEDUP)
     # the simulator is PX4-like: it refuses ArduPlane's GUIDED (custom mode 15); it has no
-    # ArduPlane failsafe parameters either, which the ArduPlane adapter would refuse it for
-    arduplane = LinkConfig(LIMITS, autopilot="arduplane", arduplane_gcs_failsafe=False)
+    # ArduPlane failsafe or airspeed parameters either, which the adapter would refuse it for
+    arduplane = LinkConfig(
+        LIMITS, autopilot="arduplane", arduplane_gcs_failsafe=False, arduplane_airspeed_check=False
+    )
     async with asyncio.timeout(40.0), running_sim(config) as sim:
         async with MavsdkHub(urls_of(sim), origin_of(sim)) as hub, hub.link(1, arduplane) as link:
             await link.wait_ready(10.0)

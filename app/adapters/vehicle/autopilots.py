@@ -26,7 +26,7 @@ from typing import Any, Final, Literal, Protocol
 from mavsdk.autopilot import Autopilot
 from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.offboard import OffboardError, PositionNedYaw, VelocityNedYaw
-from mavsdk.plugins.param import ParamError
+from mavsdk.plugins.param import ParamError, ParamResult
 from mavsdk.vehicle import Vehicle
 
 from app.adapters.vehicle.link import CourseSpeedCommand, UnsupportedVehicleError
@@ -267,6 +267,8 @@ class CommandPort(Protocol):
 
 class ParamPort(Protocol):
     async def get_param_int(self, name: str) -> int: ...
+
+    async def get_param_float(self, name: str) -> float: ...
 
     async def set_param_int(self, name: str, value: int) -> Any: ...
 
@@ -606,6 +608,11 @@ SYSID_MYGCS: Final = "SYSID_MYGCS"
 #: ArduPilot 4.7's name for SYSID_MYGCS, and the top of the range of GCS ids it may name
 MAV_GCS_SYSID: Final = "MAV_GCS_SYSID"
 MAV_GCS_SYSID_HI: Final = "MAV_GCS_SYSID_HI"
+#: the airspeed range GUIDED_CHANGE_SPEED accepts (m/s), and their names before ArduPilot 4.5
+AIRSPEED_MIN: Final = "AIRSPEED_MIN"
+AIRSPEED_MAX: Final = "AIRSPEED_MAX"
+ARSPD_FBW_MIN: Final = "ARSPD_FBW_MIN"
+ARSPD_FBW_MAX: Final = "ARSPD_FBW_MAX"
 FS_GCS_ENABL: Final = "FS_GCS_ENABL"
 FS_LONG_ACTN: Final = "FS_LONG_ACTN"
 #: MAVSDK's ground station identifies as system 245 (Configuration for GROUND_STATION)
@@ -642,6 +649,9 @@ class ArduPlaneAdapter:
     alone (a warning is logged). ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (with
     MAV_GCS_SYSID_HI, the top of a range of GCS ids when not below it): when SYSID_MYGCS cannot
     be read, that one is checked and set instead (a range that holds ``gcs_system_id`` is kept).
+    With ``check_airspeed_range`` ``prepare`` first refuses a vehicle whose airspeed range
+    (AIRSPEED_MIN..AIRSPEED_MAX, ARSPD_FBW_* before ArduPilot 4.5) does not hold the mission's
+    speed limits: it would refuse those GUIDED_CHANGE_SPEEDs in flight.
     """
 
     vehicle_id: int
@@ -649,6 +659,7 @@ class ArduPlaneAdapter:
     params: ParamPort
     limits: SetpointLimits
     gcs_system_id: int | None = MAVSDK_GCS_SYSTEM_ID
+    check_airspeed_range: bool = True
     target_component: int = 1
     course_deadband_rad: float = math.radians(0.5)
     speed_deadband_m_s: float = 0.1
@@ -666,6 +677,8 @@ class ArduPlaneAdapter:
         return "GUIDED"
 
     async def prepare(self) -> None:
+        if self.check_airspeed_range:
+            await self._check_airspeed_range()
         gcs = self.gcs_system_id
         if gcs is None:
             log.warning(
@@ -697,6 +710,48 @@ class ArduPlaneAdapter:
             FS_LONG_ACTN_RTL,
             "so that the GCS failsafe returns (RTL) instead of flying the last GUIDED course on",
         )
+
+    async def _check_airspeed_range(self) -> None:
+        """Refuse the vehicle when the mission's speeds are outside the airspeeds it takes
+        (AIRSPEED_MIN..AIRSPEED_MAX, ARSPD_FBW_MIN..ARSPD_FBW_MAX before ArduPilot 4.5): in
+        flight it would refuse every such GUIDED_CHANGE_SPEED and fly on at the last speed it
+        took. Parameters that cannot be read are only warned about."""
+        low = await self._read_number(AIRSPEED_MIN, ARSPD_FBW_MIN)
+        # (a vehicle without the first has no use for the second, whose reads would time out)
+        high = None if low is None else await self._read_number(AIRSPEED_MAX, ARSPD_FBW_MAX)
+        lim = self.limits
+        if low is None or high is None:
+            log.warning(
+                "vehicle %d: its airspeed range (%s, %s) cannot be read: a speed outside it "
+                "will be refused in flight",
+                self.vehicle_id,
+                AIRSPEED_MIN,
+                AIRSPEED_MAX,
+            )
+            return
+        log.info("vehicle %d: %s = %g, %s = %g", self.vehicle_id, low[0], low[1], high[0], high[1])
+        if lim.min_speed_m_s < low[1] or lim.max_speed_m_s > high[1]:
+            raise LinkError(
+                f"vehicle {self.vehicle_id}: the mission commands {lim.min_speed_m_s:g}-"
+                f"{lim.max_speed_m_s:g} m/s, but this ArduPlane takes airspeeds of "
+                f"{low[1]:g}-{high[1]:g} m/s only ({low[0]}, {high[0]}): widen those or narrow "
+                "the mission's speed limits"
+            )
+
+    async def _read_number(self, *names: str) -> tuple[str, float] | None:
+        """The first of ``names`` the vehicle has, and its value (stored as an integer or a
+        float), or None."""
+        for name in names:
+            try:
+                return name, float(await self.params.get_param_int(name))
+            except ParamError as exc:
+                if exc.result != ParamResult.WRONG_TYPE:
+                    continue
+            try:
+                return name, await self.params.get_param_float(name)
+            except ParamError:
+                continue
+        return None
 
     async def _gcs_id_params(self) -> tuple[str, int, int]:
         """The parameter naming the vehicle's GCS, its value, and the top of the range of GCS

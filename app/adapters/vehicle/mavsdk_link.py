@@ -250,6 +250,8 @@ class LinkConfig:
     ``px4_offboard_loss_action``: COM_OBL_RC_ACT to set on PX4 (None: leave it alone).
     ``arduplane_gcs_failsafe``: on ArduPlane, set SYSID_MYGCS to our system id and make the GCS
     failsafe return the aircraft (False: leave SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN alone).
+    ``arduplane_airspeed_check``: on ArduPlane, refuse a vehicle whose AIRSPEED_MIN..MAX does
+    not hold the mission's speeds (False: do not read them).
     """
 
     limits: SetpointLimits
@@ -262,6 +264,7 @@ class LinkConfig:
     autopilot_component_id: int = MAV_COMP_ID_AUTOPILOT1
     px4_offboard_loss_action: int | None = 5
     arduplane_gcs_failsafe: bool = True
+    arduplane_airspeed_check: bool = True
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -464,6 +467,7 @@ class MavsdkVehicleLink:
                 params=self._param,
                 limits=limits,
                 gcs_system_id=self._gcs_system_id if self._config.arduplane_gcs_failsafe else None,
+                check_airspeed_range=self._config.arduplane_airspeed_check,
                 target_component=self._config.autopilot_component_id,
             )
         return VelocityAdapter(vehicle_id=self._id, offboard=self._offboard_plugin, limits=limits)
