@@ -76,11 +76,17 @@ PARAM_OFFBOARD_LOSS_TIMEOUT: Final = "COM_OF_LOSS_T"  # s, simulated
 PARAM_OFFBOARD_LOSS_ACTION: Final = "COM_OBL_RC_ACT"  # 3: return; anything else: hold
 PARAM_CRUISE_SPEED: Final = "FW_AIRSPD_TRIM"  # m/s
 PARAM_LOITER_RADIUS: Final = "NAV_LOITER_RAD"  # m
+# the airspeed range DO_CHANGE_SPEED setpoints are held within (m/s): the vehicle's speed limits,
+# read-only here
+PARAM_AIRSPEED_MIN: Final = "FW_AIRSPD_MIN"
+PARAM_AIRSPEED_MAX: Final = "FW_AIRSPD_MAX"
 _PARAM_TYPES: Final = {
     PARAM_OFFBOARD_LOSS_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
     PARAM_OFFBOARD_LOSS_ACTION: mavlink.MAV_PARAM_TYPE_INT32,
     PARAM_CRUISE_SPEED: mavlink.MAV_PARAM_TYPE_REAL32,
     PARAM_LOITER_RADIUS: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MIN: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MAX: mavlink.MAV_PARAM_TYPE_REAL32,
 }
 _PX4_RETURN_ACTION: Final = 3
 _PX4_HOLD_ACTION: Final = 5
@@ -549,6 +555,10 @@ class SimVehicle:
             return _PX4_RETURN_ACTION if self.failsafe_action == "return" else _PX4_HOLD_ACTION
         if name == PARAM_CRUISE_SPEED:
             return self.cruise_speed_m_s
+        if name == PARAM_AIRSPEED_MIN:
+            return self.config.limits.min_speed_m_s
+        if name == PARAM_AIRSPEED_MAX:
+            return self.config.limits.max_speed_m_s
         return self._loiter_radius_m
 
     def _set_param(self, name: str, wire_value: float) -> None:

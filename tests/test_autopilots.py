@@ -312,6 +312,14 @@ async def test_refused_offboard_start_is_a_link_error_with_the_result():
 # ---- PX4 fixed-wing ----------------------------------------------------------------------------
 
 
+# PX4's defaults (FW_AIRSPD_MIN / _MAX are floats)
+STOCK_PX4: dict[str, int | float] = {
+    "COM_OBL_RC_ACT": 0,
+    "FW_AIRSPD_MIN": 10.0,
+    "FW_AIRSPD_MAX": 20.0,
+}
+
+
 def px4(
     commands: CommandRecorder | None = None,
     params: ParamRecorder | None = None,
@@ -319,7 +327,7 @@ def px4(
 ) -> tuple[Px4FixedWingAdapter, OffboardRecorder, CommandRecorder, ParamRecorder]:
     offboard = OffboardRecorder()
     commands = commands or CommandRecorder()
-    params = params or ParamRecorder({"COM_OBL_RC_ACT": 0})
+    params = params or ParamRecorder(STOCK_PX4)
     adapter = Px4FixedWingAdapter(
         vehicle_id=3,
         offboard=offboard,
@@ -397,9 +405,21 @@ async def test_px4_sets_the_offboard_loss_action_to_hold():
 
 
 async def test_px4_leaves_a_correct_offboard_loss_action_alone():
-    adapter, _, _, params = px4(params=ParamRecorder({"COM_OBL_RC_ACT": 5}))
+    adapter, _, _, params = px4(params=ParamRecorder(STOCK_PX4 | {"COM_OBL_RC_ACT": 5}))
     await adapter.prepare()
     assert params.sets == []
+
+
+async def test_px4_whose_airspeed_range_misses_the_missions_speeds_is_refused():
+    params = ParamRecorder(STOCK_PX4 | {"FW_AIRSPD_MAX": 16.0})
+    adapter, _, _, _ = px4(params=params)
+    with pytest.raises(
+        LinkError,
+        match=r"vehicle 3: the mission commands 10-18 m/s, but this PX4 flies airspeeds \(and "
+        r"holds a setpoint within them\) of 10-16 m/s only \(FW_AIRSPD_MIN, FW_AIRSPD_MAX\)",
+    ):
+        await adapter.prepare()
+    assert params.sets == []  # refused before anything was changed
 
 
 async def test_px4_offboard_loss_action_unset_means_not_touched():
@@ -627,4 +647,4 @@ async def test_arduplane_with_an_unreadable_airspeed_range_is_warned_about(caplo
     values: dict[str, int | float] = {"SYSID_MYGCS": 245, "FS_GCS_ENABL": 1, "FS_LONG_ACTN": 1}
     with caplog.at_level("WARNING"):
         await arduplane(params=ParamRecorder(values)).prepare()
-    assert "its airspeed range (AIRSPEED_MIN, AIRSPEED_MAX) cannot be read" in caplog.text
+    assert "its speed range (AIRSPEED_MIN, AIRSPEED_MAX) cannot be read" in caplog.text

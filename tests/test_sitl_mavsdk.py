@@ -142,4 +142,11 @@ async def test_mavsdk_reads_and_sets_the_px4_failsafe_parameters():
             names = {p.name for p in everything.int_params} | {
                 p.name for p in everything.float_params
             }
-            assert names == {"COM_OBL_RC_ACT", "COM_OF_LOSS_T", "FW_AIRSPD_TRIM", "NAV_LOITER_RAD"}
+            assert names == {
+                "COM_OBL_RC_ACT",
+                "COM_OF_LOSS_T",
+                "FW_AIRSPD_TRIM",
+                "NAV_LOITER_RAD",
+                "FW_AIRSPD_MIN",
+                "FW_AIRSPD_MAX",
+            }

@@ -503,6 +503,8 @@ def test_px4_parameters_set_the_failsafe_cruise_speed_and_loiter_radius():
         "COM_OBL_RC_ACT",
         "FW_AIRSPD_TRIM",
         "NAV_LOITER_RAD",
+        "FW_AIRSPD_MIN",
+        "FW_AIRSPD_MAX",
     ]
     assert param_set("COM_OBL_RC_ACT", as_int32(3)) == as_int32(3)
     assert rig.vehicle.failsafe_action == "return"
@@ -511,6 +513,7 @@ def test_px4_parameters_set_the_failsafe_cruise_speed_and_loiter_radius():
     assert param_set("NAV_LOITER_RAD", 50.0) == pytest.approx(135.0)  # tighter than it can turn
     assert param_set("NAV_LOITER_RAD", 200.0) == 200.0
     assert param_set("FW_AIRSPD_TRIM", 99.0) == 24.0  # clamped to the speed limit
+    assert param_set("FW_AIRSPD_MIN", 5.0) == 12.0  # the vehicle's speed range: read-only
     assert rig.send(mavlink.MAVLink_param_set_message(1, 1, b"NO_SUCH", 1.0, 9)) == []
     ((_, read),) = rig.send(mavlink.MAVLink_param_request_read_message(1, 1, b"", 1))
     assert read.param_id == "COM_OBL_RC_ACT"

@@ -370,6 +370,21 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
             assert sim.truth().vehicles[0].armed is False
 
 
+async def test_px4_whose_airspeed_range_misses_the_missions_speeds_is_refused_before_take_off():
+    config = sim_config(1, speedup=SPEEDUP)  # FW_AIRSPD_MIN / _MAX: 12 / 24 m/s
+    slow = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+    async with asyncio.timeout(40.0), running_sim(config) as sim:
+        async with (
+            MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+            hub.link(1, LinkConfig(slow)) as link,
+        ):
+            with pytest.raises(
+                LinkError, match=r"of 12-24 m/s only \(FW_AIRSPD_MIN, FW_AIRSPD_MAX\)"
+            ):
+                await link.wait_ready(10.0)
+        assert sim.truth().vehicles[0].armed is False
+
+
 async def test_one_link_per_vehicle_and_missing_vehicles_time_out():
     config = sim_config(1, speedup=SPEEDUP)
     async with (

@@ -482,6 +482,54 @@ COM_OBL_RC_ACT: Final = "COM_OBL_RC_ACT"
 COM_OBL_RC_ACT_HOLD: Final = 5
 
 
+async def read_param_number(params: ParamPort, *names: str) -> tuple[str, float] | None:
+    """The first of ``names`` the vehicle has and its value, stored as an integer or a float
+    (MAVSDK reads each only by its own type); None when it has none of them."""
+    for name in names:
+        try:
+            return name, float(await params.get_param_int(name))
+        except ParamError as exc:
+            if exc.result != ParamResult.WRONG_TYPE:
+                continue
+        try:
+            return name, await params.get_param_float(name)
+        except ParamError:
+            continue
+    return None
+
+
+async def check_speed_range(
+    params: ParamPort,
+    vehicle_id: int,
+    limits: SetpointLimits,
+    min_names: tuple[str, ...],
+    max_names: tuple[str, ...],
+    what: str,
+) -> None:
+    """Refuse (``LinkError``) a vehicle whose speed range, read from the first of ``min_names``
+    / ``max_names`` it has, does not hold the mission's ``limits``; only warn when the range
+    cannot be read. ``what`` says what the range is in the message ("this PX4 flies airspeeds")."""
+    low = await read_param_number(params, *min_names)
+    # (a vehicle without the first has no use for the second, whose reads would time out)
+    high = None if low is None else await read_param_number(params, *max_names)
+    if low is None or high is None:
+        log.warning(
+            "vehicle %d: its speed range (%s, %s) cannot be read: a mission speed outside it "
+            "will not be flown",
+            vehicle_id,
+            min_names[0],
+            max_names[0],
+        )
+        return
+    log.info("vehicle %d: %s = %g, %s = %g", vehicle_id, low[0], low[1], high[0], high[1])
+    if limits.min_speed_m_s < low[1] or limits.max_speed_m_s > high[1]:
+        raise LinkError(
+            f"vehicle {vehicle_id}: the mission commands {limits.min_speed_m_s:g}-"
+            f"{limits.max_speed_m_s:g} m/s, but {what} of {low[1]:g}-{high[1]:g} m/s only "
+            f"({low[0]}, {high[0]}): widen those or narrow the mission's speed limits"
+        )
+
+
 @dataclass(slots=True)
 class Px4FixedWingAdapter:
     """PX4 fixed-wing: a point ``lookahead`` ahead on the course plus the course as velocity.
@@ -491,7 +539,9 @@ class Px4FixedWingAdapter:
     whenever it moves by more than ``speed_deadband_m_s``. ``offboard_loss_action`` is the
     COM_OBL_RC_ACT wanted (what PX4 does ~1 s after setpoints stop: 5 = hold, the default here;
     PX4's own default 0 flies straight on). It is read and, if different, set before take-off;
-    ``None`` leaves the parameter alone (for a PX4-like vehicle without parameters).
+    ``None`` leaves the parameters alone (for a PX4-like vehicle without parameters). Before
+    that a vehicle whose FW_AIRSPD_MIN..FW_AIRSPD_MAX does not hold the mission's speed limits
+    is refused: PX4 would hold the commanded airspeeds within it.
     """
 
     vehicle_id: int
@@ -522,6 +572,14 @@ class Px4FixedWingAdapter:
                 COM_OBL_RC_ACT,
             )
             return
+        await check_speed_range(
+            self.params,
+            self.vehicle_id,
+            self.limits,
+            (FW_AIRSPD_MIN,),
+            (FW_AIRSPD_MAX,),
+            "this PX4 flies airspeeds (and holds a setpoint within them)",
+        )
         try:
             current = await self.params.get_param_int(COM_OBL_RC_ACT)
             log.info("vehicle %d: %s = %d", self.vehicle_id, COM_OBL_RC_ACT, current)
@@ -608,6 +666,9 @@ SYSID_MYGCS: Final = "SYSID_MYGCS"
 #: ArduPilot 4.7's name for SYSID_MYGCS, and the top of the range of GCS ids it may name
 MAV_GCS_SYSID: Final = "MAV_GCS_SYSID"
 MAV_GCS_SYSID_HI: Final = "MAV_GCS_SYSID_HI"
+#: PX4 fixed-wing's airspeed range (m/s): airspeed setpoints are held within it
+FW_AIRSPD_MIN: Final = "FW_AIRSPD_MIN"
+FW_AIRSPD_MAX: Final = "FW_AIRSPD_MAX"
 #: the airspeed range GUIDED_CHANGE_SPEED accepts (m/s), and their names before ArduPilot 4.5
 AIRSPEED_MIN: Final = "AIRSPEED_MIN"
 AIRSPEED_MAX: Final = "AIRSPEED_MAX"
@@ -678,7 +739,14 @@ class ArduPlaneAdapter:
 
     async def prepare(self) -> None:
         if self.check_airspeed_range:
-            await self._check_airspeed_range()
+            await check_speed_range(
+                self.params,
+                self.vehicle_id,
+                self.limits,
+                (AIRSPEED_MIN, ARSPD_FBW_MIN),
+                (AIRSPEED_MAX, ARSPD_FBW_MAX),
+                "this ArduPlane takes airspeeds",
+            )
         gcs = self.gcs_system_id
         if gcs is None:
             log.warning(
@@ -710,48 +778,6 @@ class ArduPlaneAdapter:
             FS_LONG_ACTN_RTL,
             "so that the GCS failsafe returns (RTL) instead of flying the last GUIDED course on",
         )
-
-    async def _check_airspeed_range(self) -> None:
-        """Refuse the vehicle when the mission's speeds are outside the airspeeds it takes
-        (AIRSPEED_MIN..AIRSPEED_MAX, ARSPD_FBW_MIN..ARSPD_FBW_MAX before ArduPilot 4.5): in
-        flight it would refuse every such GUIDED_CHANGE_SPEED and fly on at the last speed it
-        took. Parameters that cannot be read are only warned about."""
-        low = await self._read_number(AIRSPEED_MIN, ARSPD_FBW_MIN)
-        # (a vehicle without the first has no use for the second, whose reads would time out)
-        high = None if low is None else await self._read_number(AIRSPEED_MAX, ARSPD_FBW_MAX)
-        lim = self.limits
-        if low is None or high is None:
-            log.warning(
-                "vehicle %d: its airspeed range (%s, %s) cannot be read: a speed outside it "
-                "will be refused in flight",
-                self.vehicle_id,
-                AIRSPEED_MIN,
-                AIRSPEED_MAX,
-            )
-            return
-        log.info("vehicle %d: %s = %g, %s = %g", self.vehicle_id, low[0], low[1], high[0], high[1])
-        if lim.min_speed_m_s < low[1] or lim.max_speed_m_s > high[1]:
-            raise LinkError(
-                f"vehicle {self.vehicle_id}: the mission commands {lim.min_speed_m_s:g}-"
-                f"{lim.max_speed_m_s:g} m/s, but this ArduPlane takes airspeeds of "
-                f"{low[1]:g}-{high[1]:g} m/s only ({low[0]}, {high[0]}): widen those or narrow "
-                "the mission's speed limits"
-            )
-
-    async def _read_number(self, *names: str) -> tuple[str, float] | None:
-        """The first of ``names`` the vehicle has, and its value (stored as an integer or a
-        float), or None."""
-        for name in names:
-            try:
-                return name, float(await self.params.get_param_int(name))
-            except ParamError as exc:
-                if exc.result != ParamResult.WRONG_TYPE:
-                    continue
-            try:
-                return name, await self.params.get_param_float(name)
-            except ParamError:
-                continue
-        return None
 
     async def _gcs_id_params(self) -> tuple[str, int, int]:
         """The parameter naming the vehicle's GCS, its value, and the top of the range of GCS
