@@ -226,10 +226,27 @@ def observation_sources(plan: MissionPlan, replay: Sequence[Measurement] = ()) -
     return []
 
 
+#: a vehicle farther than this from the mission's origin is taken for a wrong ``[origin]``
+MAX_DISTANCE_FROM_ORIGIN_M = 50_000.0
+
+
 async def prepare_vehicle(link: VehicleLink, plan: MissionPlan, events: EventSink) -> None:
-    """Health, arm, take off, first setpoint, offboard: the MAVSDK idiom, each step checked."""
+    """Health, arm, take off, first setpoint, offboard: the MAVSDK idiom, each step checked.
+
+    A vehicle more than ``MAX_DISTANCE_FROM_ORIGIN_M`` from the mission's origin is refused
+    before it is armed: the mission is planned in metres about that origin (a SITL's home
+    differs from one autopilot to the next), and it would send the vehicle there."""
     cfg = plan.config.link
     frame = await link.wait_ready(cfg.connect_timeout_s)
+    distance = math.hypot(frame.east_m, frame.north_m)
+    if distance > MAX_DISTANCE_FROM_ORIGIN_M:
+        origin = plan.config.origin
+        raise LinkError(
+            f"vehicle {link.vehicle_id} is {distance / 1000.0:.0f} km from the mission's origin "
+            f"({origin.lat_deg:.6f}, {origin.lon_deg:.6f}), at ({frame.latitude_deg:.6f}, "
+            f"{frame.longitude_deg:.6f}): set [origin] in the mission config to where the "
+            "vehicles are"
+        )
     await link.arm()
     await link.take_off(cfg.take_off_timeout_s)
     latest = link.latest or frame
