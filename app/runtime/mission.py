@@ -463,6 +463,19 @@ async def run_mission(
     return result
 
 
+def _fusion_counters(ground: GroundStation | None) -> dict[str, int] | None:
+    """What the ground's main filter received and refused: local estimates older than the
+    newest it had from that vehicle, and ones built on an older allocation than it last gave."""
+    if ground is None:
+        return None
+    main = ground.state.main
+    return {
+        "local_estimates_taken": main.received,
+        "out_of_order_dropped": main.out_of_order_dropped,
+        "stale_basis_dropped": main.stale_basis_dropped,
+    }
+
+
 def write_outputs(
     plan: MissionPlan,
     out_dir: Path,
@@ -498,6 +511,7 @@ def write_outputs(
             "interrupted": interrupted,
             "events": dict(eventlog.counts),
             "links": counters,
+            "fusion": _fusion_counters(ground),
         }
     )
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
