@@ -417,13 +417,12 @@ async def test_summary_has_convergence_times_and_per_part_figures(full_run: Full
     assert track["spacing_error_deg"]["rms"] <= 6.0
     assert track["estimation_rmse"]["position_m"] <= 3.0
     # the ground's main filter: 3 agents x 5 local estimates a second for ~110 s, and in one
-    # process hardly any refused (late, or built on an older allocation)
+    # process few refused (late, or built on an allocation still on its way: 3.9 % in one
+    # full-length mission)
     fusion = summary["fusion"]
+    refused = fusion["out_of_order_dropped"] + fusion["stale_basis_dropped"]
     assert fusion["local_estimates_taken"] > 1000
-    assert (
-        fusion["out_of_order_dropped"] + fusion["stale_basis_dropped"]
-        < 0.05 * (fusion["local_estimates_taken"])
-    )
+    assert refused < 0.15 * fusion["local_estimates_taken"]
 
 
 async def test_track_csv_has_a_stage_column_through_gather_adjust_track(full_run: FullRun) -> None:
