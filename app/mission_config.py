@@ -110,10 +110,15 @@ class ObservationsConfig(StrictModel):
 class EstimatorSettings(StrictModel):
     """The target estimator: ``config`` names its parameter file (``configs/estimator.toml``:
     models, mode transitions, gating, federated feedback); ``use_target_accel`` passes the
-    estimated acceleration on to the moving-target correction."""
+    estimated acceleration on to the moving-target correction. In a mission the ground station
+    fuses every ``fuse_period_s`` and sends the fused information back to the agents (an
+    allocation) every ``allocation_period_s``; the file's ``federated.feedback_period_s`` is
+    for ``standoff estimate``, where there is no round trip (docs/estimation.md)."""
 
     config: str = "estimator"
     use_target_accel: bool = False
+    fuse_period_s: Positive = 0.2
+    allocation_period_s: Positive = 1.0
 
 
 class LinkSettings(StrictModel):

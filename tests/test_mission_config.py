@@ -65,6 +65,7 @@ BASE = load_config("hil", MissionConfig).model_dump()
         ({"radius_m": -5.0}, "radius_m"),
         ({"colour": "red"}, "colour"),
         ({"link": {"autopilot": "betaflight"}}, "link.autopilot"),
+        ({"estimator": {"allocation_period_s": 0.0}}, "estimator.allocation_period_s"),
     ],
 )
 def test_bad_missions_are_refused_with_the_field(patch, needle):
@@ -89,3 +90,15 @@ def test_track_stage_settings_reach_only_the_track_parameters():
         assert agent.track.guidance.speed_cap
         assert not agent.agent.guidance.speed_cap
         assert (agent.latency_s, agent.hold_s) == (0.08, 0.2)
+
+
+def test_the_ground_fuses_and_allocates_at_the_missions_periods():
+    default = build_plan(load_config("hil", MissionConfig)).ground
+    assert (default.fuse_period_s, default.feedback_period_s) == (0.2, 1.0)
+    patched = validate_config(
+        {**BASE, "estimator": {"fuse_period_s": 0.5, "allocation_period_s": 2.5}},
+        MissionConfig,
+        source="m.toml",
+    )
+    ground = build_plan(patched).ground
+    assert (ground.fuse_period_s, ground.feedback_period_s) == (0.5, 2.5)
