@@ -1,0 +1,81 @@
+"""The perfect-foresight optimiser of benchmarks/bench_oracle.py: its gradient, its limits, and
+that it finds what is known to be possible."""
+
+import math
+
+import numpy as np
+
+from benchmarks.bench_oracle import Airframe, Problem, cost_and_gradient, fly, solve
+
+AIRFRAME = Airframe(10.0, 18.0, 2.0, 0.2)
+
+
+def test_the_gradient_is_the_costs_derivative():
+    rng = np.random.default_rng(3)
+    steps, n = 40, 3
+    problem = Problem(
+        position=rng.normal(0.0, 60.0, (n, 2)) + np.array([100.0, 0.0]),
+        heading=rng.uniform(-math.pi, math.pi, n),
+        speed=np.array([12.0, 17.9, 10.05]),  # two of them run into a speed limit
+        target=np.cumsum(np.full((steps + 1, 2), 0.4), axis=0),
+        dt_s=0.25,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+    )
+    x = np.concatenate([rng.uniform(-0.2, 0.2, steps * n), rng.uniform(-2.0, 2.0, steps * n)])
+    _, grad = cost_and_gradient(x, problem)
+    h = 1e-6
+    for i in rng.choice(x.size, 20, replace=False):
+        up, down = x.copy(), x.copy()
+        up[i] += h
+        down[i] -= h
+        numeric = (cost_and_gradient(up, problem)[0] - cost_and_gradient(down, problem)[0]) / (
+            2 * h
+        )
+        assert math.isclose(grad[i], numeric, rel_tol=1e-4, abs_tol=1e-7), i
+
+
+def test_it_finds_the_orbit_a_vehicle_on_the_circle_can_hold():
+    # On the circle about a still target, flying its tangent at 14 m/s: holding it takes
+    # 14 / 90 rad/s, within the 0.2 limit. Started flying straight on, the optimiser turns.
+    steps = 100
+    problem = Problem(
+        position=np.array([[90.0, 0.0]]),
+        heading=np.array([math.pi / 2]),
+        speed=np.array([14.0]),
+        target=np.zeros((steps + 1, 2)),
+        dt_s=0.2,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+    )
+    straight = np.zeros(2 * steps)
+    best, found = solve(problem, {"straight": straight}, max_iter=600)
+    start_cost = cost_and_gradient(straight, problem)[0]
+    assert found["straight"] is best
+    assert best.cost < start_cost
+    assert best.dist_rms_m < 0.5
+    speed = best.flight.speed
+    assert speed.min() >= 10.0
+    assert speed.max() <= 18.0
+    rates = np.diff(best.flight.heading, axis=0) / problem.dt_s
+    assert np.abs(rates).max() <= 0.2 + 1e-9
+    assert np.abs(np.diff(speed, axis=0) / problem.dt_s).max() <= 2.0 + 1e-9
+
+
+def test_it_cannot_hold_a_circle_tighter_than_the_airframe_turns():
+    # A still target and a 40 m circle: at 10 m/s and 0.2 rad/s the tightest turn is 50 m
+    # across, so the best any controller can do is orbit at about 50 m, 10 m off.
+    steps = 200
+    problem = Problem(
+        position=np.array([[40.0, 0.0]]),
+        heading=np.array([math.pi / 2]),
+        speed=np.array([10.0]),
+        target=np.zeros((steps + 1, 2)),
+        dt_s=0.2,
+        radius_m=40.0,
+        airframe=AIRFRAME,
+    )
+    best, _ = solve(problem, {"straight": np.zeros(2 * steps)})
+    flight = fly(problem, np.zeros((steps, 1)), np.zeros((steps, 1)))
+    assert flight.position.shape == (steps + 1, 1, 2)
+    assert 5.0 < best.dist_rms_m < 15.0
