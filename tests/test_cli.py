@@ -5,7 +5,7 @@ import sys
 import pytest
 
 from app.cli import COMMAND_MODULES, _reasons, main
-from app.cli.fly import with_overrides
+from app.cli._options import with_overrides
 from app.config import load_config
 from app.errors import ConfigError
 from app.mission_config import MissionConfig
@@ -81,6 +81,26 @@ def test_fly_validates_its_options_like_the_config_file(args, field, tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert err[0].startswith(f"standoff fly: error: command line: {field}: ")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["ground", "--broker", "mqtt://127.0.0.1:1"], ["agent", "--vehicle", "0"]],
+)
+@pytest.mark.parametrize(
+    ("args", "field"),
+    [(["--vehicles", "0"], "vehicles"), (["--base-port", "70000"], "sim.base_port")],
+)
+def test_ground_and_agent_check_the_shared_options_like_fly(command, args, field, tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = [*command, "--out", str(out), *args]
+    if command[0] == "agent":
+        argv += ["--broker", "mqtt://127.0.0.1:1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith(f"standoff {command[0]}: error: command line: {field}: ")
     assert not out.exists()
 
 

@@ -6,10 +6,8 @@ import sys
 from pathlib import Path
 
 from app.adapters.vehicle.mavsdk_link import validate_url
-from app.cli.fly import DEFAULT_CONFIG
-from app.cli.ground import broker_url
+from app.cli._options import add_mission_options, broker_url, with_overrides
 from app.config import load_config
-from app.errors import ConfigError
 from app.mission_config import MissionConfig
 from app.runtime.distributed import agent_url, run_agent
 from app.runtime.mission import build_plan
@@ -37,16 +35,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         metavar="I",
         help="which vehicle, 0-based (MAVLink system id I+1)",
     )
-    p.add_argument(
-        "config",
-        nargs="?",
-        default=DEFAULT_CONFIG,
-        help="mission config: a name in configs/ or a path (default: hil)",
-    )
-    p.add_argument(
-        "--broker",
-        metavar="URL",
-        help="MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')",
+    add_mission_options(
+        p, "MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')"
     )
     p.add_argument(
         "--connect",
@@ -57,10 +47,6 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         ),
     )
     p.add_argument(
-        "--base-port", type=int, help="built-in simulator's first UDP port (default: the config's)"
-    )
-    p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
-    p.add_argument(
         "--out",
         type=Path,
         help="folder for the tlog and logs (default: runs/<name>-agent-<I>); the ground's "
@@ -70,15 +56,11 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 
 def run(args: argparse.Namespace) -> int:
-    config = load_config(args.config, MissionConfig)
+    config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
-    if args.vehicles is not None and not 1 <= args.vehicles <= 50:
-        raise ConfigError(f"--vehicles {args.vehicles} is out of range 1..50")
-    if args.base_port is not None and not 1024 <= args.base_port <= 65000:
-        raise ConfigError(f"--base-port {args.base_port} is out of range 1024..65000")
-    plan = build_plan(config, args.vehicles)
+    plan = build_plan(config)
     vehicle: int = args.vehicle
-    connect = validate_url(agent_url(plan, vehicle, args.connect, args.base_port))
+    connect = validate_url(agent_url(plan, vehicle, args.connect, config.sim.base_port))
     builtin = args.connect is None and not config.link.connect
     out = args.out or Path("runs") / f"{config.name}-agent-{vehicle}"
 

@@ -10,12 +10,12 @@ from pathlib import Path
 from rich.console import Console
 
 from app.adapters.live_view import LiveView
-from app.config import load_config, validate_config
+from app.cli._options import add_mission_options, with_overrides
+from app.config import load_config
 from app.mission_config import MissionConfig
 from app.runtime.mission import build_plan, run_mission
 
 ORDER = 10
-DEFAULT_CONFIG = "hil"
 
 
 def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
@@ -29,12 +29,7 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder."
         ),
     )
-    p.add_argument(
-        "config",
-        nargs="?",
-        default=DEFAULT_CONFIG,
-        help="mission config: a name in configs/ or a path (default: hil)",
-    )
+    add_mission_options(p, "MQTT broker, mqtt://[user:pass@]host:port (default: in-process)")
     p.add_argument("--out", type=Path, help="run folder (default: a new folder under runs/)")
     p.add_argument(
         "--connect",
@@ -42,34 +37,10 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         metavar="URL",
         help="fly external vehicles (udpin://, udpout://, tcp://, serial://)",
     )
-    p.add_argument("--broker", metavar="URL", help="MQTT broker (mqtt://[user:pass@]host:port)")
-    p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
     p.add_argument("--speedup", type=float, help="built-in simulator speed-up factor")
-    p.add_argument("--base-port", type=int, help="built-in simulator's first UDP port")
     p.add_argument("--seed", type=int, help="built-in simulator's random seed")
     p.add_argument("--quiet", action="store_true", help="no live view")
     p.set_defaults(handler=run)
-
-
-def with_overrides(config: MissionConfig, args: argparse.Namespace) -> MissionConfig:
-    """The config with the command line's --vehicles, --speedup, --seed and --base-port,
-    validated like the file itself (ConfigError naming the option's field)."""
-    sim = {
-        key: value
-        for key, value in (
-            ("speedup", args.speedup),
-            ("seed", args.seed),
-            ("base_port", args.base_port),
-        )
-        if value is not None
-    }
-    if not sim and args.vehicles is None:
-        return config
-    raw = config.model_dump()
-    raw["sim"].update(sim)
-    if args.vehicles is not None:
-        raw["vehicles"] = args.vehicles
-    return validate_config(raw, MissionConfig, "command line")
 
 
 def default_out_dir(name: str) -> Path:

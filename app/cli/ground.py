@@ -8,11 +8,10 @@ from pathlib import Path
 
 from rich.console import Console
 
-from app.adapters.bus import BrokerUrl
 from app.adapters.live_view import LiveView
-from app.cli.fly import DEFAULT_CONFIG, default_out_dir, report
+from app.cli._options import add_mission_options, broker_url, with_overrides
+from app.cli.fly import default_out_dir, report
 from app.config import load_config
-from app.errors import ConfigError
 from app.mission_config import MissionConfig
 from app.runtime.distributed import run_ground
 from app.runtime.mission import build_plan
@@ -33,53 +32,25 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "simulator for the mission; otherwise the vehicles are elsewhere."
         ),
     )
-    p.add_argument(
-        "config",
-        nargs="?",
-        default=DEFAULT_CONFIG,
-        help="mission config: a name in configs/ or a path (default: hil)",
-    )
-    p.add_argument(
-        "--broker",
-        metavar="URL",
-        help="MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')",
+    add_mission_options(
+        p, "MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')"
     )
     p.add_argument("--out", type=Path, help="run folder (default: a new folder under runs/)")
-    p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
     p.add_argument(
         "--sitl",
         action="store_true",
         help="also run the built-in simulator (the agents connect to its UDP ports)",
     )
-    p.add_argument(
-        "--base-port", type=int, help="built-in simulator's first UDP port (default: the config's)"
-    )
     p.add_argument("--quiet", action="store_true", help="no live view")
     p.set_defaults(handler=run)
 
 
-def broker_url(args: argparse.Namespace, config: MissionConfig) -> str:
-    """The broker to use: ``--broker``, else the config's ``bus``; checked before any I/O."""
-    url: str | None = args.broker or config.bus
-    if url is None:
-        raise ConfigError(
-            "no MQTT broker: give --broker mqtt://host:port (or 'bus' in the config);"
-            " the processes of a mission meet on a broker"
-        )
-    BrokerUrl.parse(url)  # raises BusUrlError (a ConfigError) with the reason
-    return url
-
-
 def run(args: argparse.Namespace) -> int:
-    config = load_config(args.config, MissionConfig)
+    config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
-    if args.base_port is not None and not 1024 <= args.base_port <= 65000:
-        raise ConfigError(f"--base-port {args.base_port} is out of range 1024..65000")
-    if args.vehicles is not None and not 1 <= args.vehicles <= 50:
-        raise ConfigError(f"--vehicles {args.vehicles} is out of range 1..50")
-    plan = build_plan(config, args.vehicles)
+    plan = build_plan(config)
     out = args.out or default_out_dir(config.name)
-    base_port = args.base_port if args.base_port is not None else config.sim.base_port
+    base_port = config.sim.base_port
     console = Console()
 
     def notify(line: str) -> None:
