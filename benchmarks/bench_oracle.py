@@ -1,7 +1,7 @@
 """What a controller with perfect foresight could do over a track segment, against the mission.
 
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
-      [--vary-command 2.9] [--dt 0.2]
+      [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2]
 
 For each seed the mission fast-sim (``app.runtime.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -21,13 +21,18 @@ causal controller on the simulator's airframe can beat by much: where it stays a
 issue's figures, the figures cannot be met from where the 7 m/s leg left the team.
 
 Prints per seed the mission's figures, the oracle's, their ratio, and the team's state at the
-segment's start (distance errors, speeds, adjacent gaps); the means at the end.
+segment's start (distance errors, speeds, adjacent gaps); the means at the end. ``--run`` adds
+missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the simulator), read
+from their track.csv and summary.json.
 """
 
 import argparse
+import csv
+import json
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,8 +41,8 @@ from scipy.optimize import minimize  # type: ignore[import-untyped]
 from app.config import load_config
 from app.core.frames import paper_angle_from_course
 from app.mission_config import MissionConfig
-from app.report.summary import TeamSample
-from app.runtime.mission import build_plan
+from app.report.summary import TeamSample, VehicleSample
+from app.runtime.mission import MissionPlan, build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 Array = NDArray[np.float64]
@@ -233,12 +238,119 @@ def controls_of(samples: list[TeamSample], t0: float, problem: Problem) -> Array
     )
 
 
+def run_samples(run_dir: Path, plan: MissionPlan) -> list[TeamSample]:
+    """A run folder's track.csv as the team's samples (times with every vehicle's row)."""
+    rows: dict[float, list[dict[str, str]]] = {}
+    with (run_dir / "track.csv").open() as f:
+        for row in csv.DictReader(f):
+            rows.setdefault(float(row["t_s"]), []).append(row)
+    samples = []
+    for t, group in sorted(rows.items()):
+        if len(group) != plan.count:
+            continue
+        group.sort(key=lambda r: int(r["vehicle"]))
+        first = group[0]
+        samples.append(
+            TeamSample(
+                t,
+                first["stage"],
+                plan.target.segment_at(t),
+                float(first["target_east_m"]),
+                float(first["target_north_m"]),
+                0.0,
+                0.0,
+                None,
+                tuple(
+                    VehicleSample(
+                        int(r["vehicle"]),
+                        float(r["active"]) > 0.5,
+                        float(r["east_m"]),
+                        float(r["north_m"]),
+                        float(r["speed_m_s"]),
+                        float(r["course_rad"]),
+                    )
+                    for r in group
+                ),
+            )
+        )
+    return samples
+
+
+def run_figures(run_dir: Path, segment: str) -> tuple[float, float]:
+    """The segment's RMS distance and spacing errors from a run's summary.json."""
+    team = json.loads((run_dir / "summary.json").read_text())["parts"][f"track:{segment}"]["team"]
+    return float(team["distance_error_m"]["rms"]), float(team["spacing_error_deg"]["rms"])
+
+
+def case(
+    name: str,
+    samples: list[TeamSample],
+    plan: MissionPlan,
+    mission: tuple[float, float],
+    args: argparse.Namespace,
+    airframe: Airframe,
+    seed: int,
+) -> tuple[float, float, float, float]:
+    """The oracle from the team's state at the segment's start; prints and returns
+    (mission distance, mission spacing, oracle distance, oracle spacing)."""
+    t_start = time.perf_counter()
+    seg = [s for s in samples if s.target_segment == args.segment]
+    t0, t1 = seg[0].t_s, seg[-1].t_s
+    first = seg[0]
+    steps = round((t1 - t0) / args.dt)
+    path = [plan.target.state_at(t0 + k * args.dt) for k in range(steps + 1)]
+    problem = Problem(
+        position=np.array([[v.east_m, v.north_m] for v in first.vehicles]),
+        heading=np.array([paper_angle_from_course(v.course_rad) for v in first.vehicles]),
+        speed=np.array([v.speed_m_s for v in first.vehicles]),
+        target=np.array([[p.east_m, p.north_m] for p in path]),
+        dt_s=args.dt,
+        radius_m=plan.config.radius_m,
+        airframe=airframe,
+    )
+    n = problem.count
+    flown = controls_of([s for s in samples if t0 - 1e-6 <= s.t_s <= t1 + 1e-6], t0, problem)
+    rng = np.random.default_rng(seed)
+    starts = {"flown": flown}
+    for k in range(args.perturbed):
+        shake = np.concatenate([rng.normal(0.0, 0.05, steps * n), rng.normal(0.0, 0.5, steps * n)])
+        starts[f"shaken-{k + 1}"] = flown + shake
+    best, found = solve(problem, starts, args.max_iter)
+    dist0, spacing0 = errors(problem, fly(problem, np.zeros((steps, n)), np.zeros((steps, n))))
+    gaps = np.degrees(spacing0[0]) + 360.0 / n
+    print(
+        f"{name}: at the start distance errors "
+        + " ".join(f"{d:+.1f}" for d in dist0[0])
+        + " m, speeds "
+        + " ".join(f"{v:.1f}" for v in problem.speed)
+        + " m/s, gaps "
+        + " ".join(f"{g:.0f}" for g in gaps)
+        + " deg"
+    )
+    print(
+        f"  mission {mission[0]:6.2f} m {mission[1]:5.2f} deg | "
+        f"oracle {best.dist_rms_m:6.2f} m {best.spacing_rms_deg:5.2f} deg (from {best.start}; "
+        + ", ".join(f"{k} {o.dist_rms_m:.2f}/{o.spacing_rms_deg:.2f}" for k, o in found.items())
+        + f") | mission/oracle {mission[0] / best.dist_rms_m:.2f} "
+        f"{mission[1] / best.spacing_rms_deg:.2f}  [{time.perf_counter() - t_start:.0f} s]",
+        flush=True,
+    )
+    return mission[0], mission[1], best.dist_rms_m, best.spacing_rms_deg
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("config", nargs="?", default="hil")
     ap.add_argument("--segment", default="B-C")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6])
+    ap.add_argument("--seeds", type=int, nargs="*", default=[1, 2, 3, 4, 5, 6])
     ap.add_argument("--vary-command", type=float, default=2.9)
+    ap.add_argument(
+        "--run",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="also run folders of flown missions (standoff fly --out DIR) of the same config",
+    )
     ap.add_argument("--dt", type=float, default=0.2)
     ap.add_argument("--max-iter", type=int, default=4000)
     ap.add_argument(
@@ -251,9 +363,9 @@ def main() -> None:
         lim.min_speed_m_s, lim.max_speed_m_s, lim.max_accel_m_s2, lim.max_course_rate_rad_s
     )
     print(
-        f"{args.config}: segment {args.segment}, seeds {args.seeds} (tracking command "
-        f"+{args.vary_command:g} s per seed), oracle step {args.dt:g} s; cost = mean d^2/(3 m)^2 "
-        "+ mean spacing^2/(4 deg)^2"
+        f"{args.config}: segment {args.segment}, fast-sim seeds {args.seeds} (tracking command "
+        f"+{args.vary_command:g} s per seed), runs {[str(r) for r in args.run]}, oracle step "
+        f"{args.dt:g} s; cost = mean d^2/(3 m)^2 + mean spacing^2/(4 deg)^2"
     )
     rows = []
     for seed in args.seeds:
@@ -261,71 +373,15 @@ def main() -> None:
             update={"tracking_command_s": base.tracking_command_s + args.vary_command * seed}
         )
         plan = build_plan(config)
-        t_start = time.perf_counter()
         result = run_mission_sim(MissionSimSetup(plan, seed=seed))
-        mission = track_figures(result, plan.target.labels)[args.segment]
-        seg = [s for s in result.samples if s.target_segment == args.segment]
-        t0, t1 = seg[0].t_s, seg[-1].t_s
-        first = seg[0]
-        steps = round((t1 - t0) / args.dt)
-        target = np.array(
-            [
-                [
-                    plan.target.state_at(t0 + k * args.dt).east_m,
-                    plan.target.state_at(t0 + k * args.dt).north_m,
-                ]
-                for k in range(steps + 1)
-            ]
-        )
-        problem = Problem(
-            position=np.array([[v.east_m, v.north_m] for v in first.vehicles]),
-            heading=np.array([paper_angle_from_course(v.course_rad) for v in first.vehicles]),
-            speed=np.array([v.speed_m_s for v in first.vehicles]),
-            target=target,
-            dt_s=args.dt,
-            radius_m=config.radius_m,
-            airframe=airframe,
-        )
-        n = problem.count
-        flown = controls_of(
-            [s for s in result.samples if t0 - 1e-6 <= s.t_s <= t1 + 1e-6], t0, problem
-        )
-        rng = np.random.default_rng(seed)
-        starts = {"flown": flown}
-        for k in range(args.perturbed):
-            shake = np.concatenate(
-                [rng.normal(0.0, 0.05, steps * n), rng.normal(0.0, 0.5, steps * n)]
-            )
-            starts[f"shaken-{k + 1}"] = flown + shake
-        best, found = solve(problem, starts, args.max_iter)
-        dist0, spacing0 = errors(problem, fly(problem, np.zeros((steps, n)), np.zeros((steps, n))))
-        gaps = np.degrees(spacing0[0]) + 360.0 / n
-        print(
-            f"seed {seed}: at the start distance errors "
-            + " ".join(f"{d:+.1f}" for d in dist0[0])
-            + " m, speeds "
-            + " ".join(f"{v:.1f}" for v in problem.speed)
-            + " m/s, gaps "
-            + " ".join(f"{g:.0f}" for g in gaps)
-            + " deg"
-        )
-        print(
-            f"  mission {mission['dist_rms_m']:6.2f} m {mission['spacing_rms_deg']:5.2f} deg | "
-            f"oracle {best.dist_rms_m:6.2f} m {best.spacing_rms_deg:5.2f} deg (from {best.start}; "
-            + ", ".join(f"{k} {o.dist_rms_m:.2f}/{o.spacing_rms_deg:.2f}" for k, o in found.items())
-            + f") | mission/oracle {mission['dist_rms_m'] / best.dist_rms_m:.2f} "
-            f"{mission['spacing_rms_deg'] / best.spacing_rms_deg:.2f}  "
-            f"[{time.perf_counter() - t_start:.0f} s]",
-            flush=True,
-        )
-        rows.append(
-            (
-                mission["dist_rms_m"],
-                mission["spacing_rms_deg"],
-                best.dist_rms_m,
-                best.spacing_rms_deg,
-            )
-        )
+        figs = track_figures(result, plan.target.labels)[args.segment]
+        mission = (figs["dist_rms_m"], figs["spacing_rms_deg"])
+        rows.append(case(f"seed {seed}", result.samples, plan, mission, args, airframe, seed))
+    plan = build_plan(base)
+    for i, run_dir in enumerate(args.run):
+        samples = run_samples(run_dir, plan)
+        mission = run_figures(run_dir, args.segment)
+        rows.append(case(f"run {run_dir}", samples, plan, mission, args, airframe, 100 + i))
     m = np.mean(np.array(rows), axis=0)
     met = sum(1 for r in rows if r[2] <= 3.0 and r[3] <= 4.0)
     print(
