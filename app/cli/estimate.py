@@ -9,6 +9,7 @@ import argparse
 import logging
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import Field
@@ -24,11 +25,13 @@ from app.config import load_config
 from app.config_models import StrictModel, TargetConfig
 from app.core.estimation.local import StepReport
 from app.core.estimation.messages import Observation
-from app.core.estimation.metrics import ErrorSeries, errors
 from app.core.estimation.pipeline import RunResult, run_centralised, run_federated
 from app.errors import InputError
 from app.estimator_config import load_estimator
 from app.runtime.estimation_scenarios import ScenarioData, SensorSpec, generate
+
+if TYPE_CHECKING:
+    from app.core.estimation.metrics import ErrorSeries
 
 ORDER = 50
 
@@ -116,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
     write_estimates(args.out, track.t_s, track.x, track.p)
     _print_counts(observations, result, args.out)
     if truth is not None:
+        # scipy.stats only when scored: it doubles the start-up of every other subcommand
+        from app.core.estimation.metrics import errors
+
         series = errors(track.t_s, track.x, truth.t_s, truth.states, truth.segments, track.p)
         _print_errors(series, observations, truth.t_s, truth.states)
         if args.plots is not None:
@@ -178,7 +184,7 @@ def _print_counts(observations: list[Observation], result: RunResult, out: Path)
 
 
 def _print_errors(
-    series: ErrorSeries,
+    series: "ErrorSeries",
     observations: list[Observation],
     truth_t: np.ndarray,
     truth: np.ndarray,
