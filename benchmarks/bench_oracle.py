@@ -18,7 +18,9 @@ noise on the controls (0.05 rad/s, 0.5 m/s^2; starting straight ahead or on a co
 found only far worse local optima, 29-33 m). The best it finds is an upper bound on the
 true optimum and, because it knows the future and flies an ideal airframe, a reference no
 causal controller on the simulator's airframe can beat by much: where it stays above the
-issue's figures, the figures cannot be met from where the 7 m/s leg left the team.
+issue's figures, the figures cannot be met from where the 7 m/s leg left the team. ``--lead S``
+starts the oracle S seconds before the segment (still scored over the segment only): what
+knowing the turn in advance and placing the team for it would buy.
 
 Prints per seed the mission's figures, the oracle's, their ratio, and the team's state at the
 segment's start (distance errors, speeds, adjacent gaps); the means at the end. ``--run`` adds
@@ -71,6 +73,7 @@ class Problem:
     airframe: Airframe
     dist_ref_m: float = 3.0
     spacing_ref_rad: float = math.radians(4.0)
+    score_from: int = 1  # the first sample the cost counts (later: a lead-in before the segment)
 
     @property
     def steps(self) -> int:
@@ -131,7 +134,7 @@ def errors(problem: Problem, flight: Flight) -> tuple[Array, Array]:
 
 def cost_and_gradient(x: Array, problem: Problem) -> tuple[float, Array]:
     """The cost of the controls ``x`` = (rates (N, n), accelerations (N, n)) flattened, and its
-    gradient. Samples 1..N count (sample 0 is where the team starts)."""
+    gradient. Samples ``score_from``..N count (sample 0 is where the team starts)."""
     p, dt = problem, problem.dt_s
     n_steps, n = p.steps, p.count
     rate = x[: n_steps * n].reshape(n_steps, n)
@@ -140,19 +143,20 @@ def cost_and_gradient(x: Array, problem: Problem) -> tuple[float, Array]:
     rel = flight.position - p.target[:, None, :]
     r = np.linalg.norm(rel, axis=-1)
     e = r - p.radius_m
-    samples = n_steps * n
+    k0 = p.score_from
+    samples = (n_steps + 1 - k0) * n
     wd = 1.0 / (p.dist_ref_m**2 * samples)
-    cost = wd * float(np.sum(e[1:] ** 2))
+    cost = wd * float(np.sum(e[k0:] ** 2))
     grad_p = np.zeros_like(flight.position)
-    grad_p[1:] = (2.0 * wd * e[1:] / r[1:])[..., None] * rel[1:]
+    grad_p[k0:] = (2.0 * wd * e[k0:] / r[k0:])[..., None] * rel[k0:]
     if n > 1:
         nxt = p.successor()
         polar = np.arctan2(rel[..., 1], rel[..., 0])
         es = np.mod(polar[:, nxt] - polar, 2.0 * math.pi) - 2.0 * math.pi / n
         ws = 1.0 / (p.spacing_ref_rad**2 * samples)
-        cost += ws * float(np.sum(es[1:] ** 2))
+        cost += ws * float(np.sum(es[k0:] ** 2))
         d_gap = 2.0 * ws * es
-        d_gap[0] = 0.0
+        d_gap[:k0] = 0.0
         d_polar = -d_gap
         for i in range(n):
             d_polar[:, nxt[i]] += d_gap[:, i]
@@ -186,8 +190,8 @@ class Oracle:
 def figures(problem: Problem, flight: Flight) -> tuple[float, float]:
     dist, spacing = errors(problem, flight)
     return (
-        math.sqrt(float(np.mean(dist[1:] ** 2))),
-        math.degrees(math.sqrt(float(np.mean(spacing[1:] ** 2)))),
+        math.sqrt(float(np.mean(dist[problem.score_from :] ** 2))),
+        math.degrees(math.sqrt(float(np.mean(spacing[problem.score_from :] ** 2)))),
     )
 
 
@@ -295,8 +299,9 @@ def case(
     (mission distance, mission spacing, oracle distance, oracle spacing)."""
     t_start = time.perf_counter()
     seg = [s for s in samples if s.target_segment == args.segment]
-    t0, t1 = seg[0].t_s, seg[-1].t_s
-    first = seg[0]
+    t0, t1 = seg[0].t_s - args.lead, seg[-1].t_s
+    first = min(samples, key=lambda s: abs(s.t_s - t0))
+    t0 = first.t_s
     steps = round((t1 - t0) / args.dt)
     path = [plan.target.state_at(t0 + k * args.dt) for k in range(steps + 1)]
     problem = Problem(
@@ -307,6 +312,7 @@ def case(
         dt_s=args.dt,
         radius_m=plan.config.radius_m,
         airframe=airframe,
+        score_from=max(1, round((seg[0].t_s - t0) / args.dt)),
     )
     n = problem.count
     flown = controls_of([s for s in samples if t0 - 1e-6 <= s.t_s <= t1 + 1e-6], t0, problem)
@@ -319,7 +325,9 @@ def case(
     dist0, spacing0 = errors(problem, fly(problem, np.zeros((steps, n)), np.zeros((steps, n))))
     gaps = np.degrees(spacing0[0]) + 360.0 / n
     print(
-        f"{name}: at the start distance errors "
+        f"{name}: at the start"
+        + (f" (the oracle's, {args.lead:g} s before the segment)" if args.lead else "")
+        + " distance errors "
         + " ".join(f"{d:+.1f}" for d in dist0[0])
         + " m, speeds "
         + " ".join(f"{v:.1f}" for v in problem.speed)
@@ -350,6 +358,12 @@ def main() -> None:
         nargs="+",
         default=[],
         help="also run folders of flown missions (standoff fly --out DIR) of the same config",
+    )
+    ap.add_argument(
+        "--lead",
+        type=float,
+        default=0.0,
+        help="start the oracle this many seconds before the segment (scored from its start)",
     )
     ap.add_argument("--dt", type=float, default=0.2)
     ap.add_argument("--max-iter", type=int, default=4000)

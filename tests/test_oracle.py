@@ -4,13 +4,15 @@ that it finds what is known to be possible."""
 import math
 
 import numpy as np
+import pytest
 
 from benchmarks.bench_oracle import Airframe, Problem, cost_and_gradient, fly, solve
 
 AIRFRAME = Airframe(10.0, 18.0, 2.0, 0.2)
 
 
-def test_the_gradient_is_the_costs_derivative():
+@pytest.mark.parametrize("score_from", [1, 7])
+def test_the_gradient_is_the_costs_derivative(score_from):
     rng = np.random.default_rng(3)
     steps, n = 40, 3
     problem = Problem(
@@ -21,6 +23,7 @@ def test_the_gradient_is_the_costs_derivative():
         dt_s=0.25,
         radius_m=90.0,
         airframe=AIRFRAME,
+        score_from=score_from,
     )
     x = np.concatenate([rng.uniform(-0.2, 0.2, steps * n), rng.uniform(-2.0, 2.0, steps * n)])
     _, grad = cost_and_gradient(x, problem)
