@@ -27,7 +27,7 @@ def test_the_gradient_is_the_costs_derivative(score_from):
     )
     x = np.concatenate([rng.uniform(-0.2, 0.2, steps * n), rng.uniform(-2.0, 2.0, steps * n)])
     _, grad = cost_and_gradient(x, problem)
-    h = 1e-6
+    h = 1e-4  # the cost is ~4e3: a smaller step drowns the difference in rounding
     for i in rng.choice(x.size, 20, replace=False):
         up, down = x.copy(), x.copy()
         up[i] += h
@@ -35,7 +35,7 @@ def test_the_gradient_is_the_costs_derivative(score_from):
         numeric = (cost_and_gradient(up, problem)[0] - cost_and_gradient(down, problem)[0]) / (
             2 * h
         )
-        assert math.isclose(grad[i], numeric, rel_tol=1e-4, abs_tol=1e-7), i
+        assert math.isclose(grad[i], numeric, rel_tol=1e-5, abs_tol=1e-8), i
 
 
 def test_it_finds_the_orbit_a_vehicle_on_the_circle_can_hold():
