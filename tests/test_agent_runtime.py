@@ -98,8 +98,9 @@ async def test_only_the_newest_of_the_fused_estimates_waiting_is_applied(queued:
     ):
         agent = VehicleAgent(params, link, agent_bus, Events())
         running = tg.create_task(agent.run())
-        for k in range(3):  # the local filter starts on the camera's observations
-            link.seen.put_nowait(TargetObservation(1, 0.1 * k, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0))
+        for k in range(3):  # the local filter starts on the camera's observations (0.5 s
+            # apart: a backlog within merge_window_s would be merged into one)
+            link.seen.put_nowait(TargetObservation(1, 0.5 * k, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0))
         await until(lambda: agent.state.local.counters.updated >= 2)
         local = agent.state.local.estimate()
         assert local is not None
@@ -121,4 +122,31 @@ async def test_only_the_newest_of_the_fused_estimates_waiting_is_applied(queued:
         await asyncio.sleep(0.05)  # time enough for any older one to be applied after it
         assert agent.state.local.counters.feedback - before == 1
         assert agent_bus.stats.dropped == queued - 1
+        running.cancel()
+
+
+async def test_observations_that_queued_while_the_agent_was_busy_are_merged():
+    """3 s of a camera's fixes arrive at once (the agent had no turn meanwhile): they reach the
+    local filter as about one merged fix per merge_window_s, every one accounted for, and the
+    estimate follows the target (7 m/s east)."""
+    plan = build_plan(load_config("hil", MissionConfig))
+    broker = InProcessBroker()
+    link = CameraOnlyLink()
+    for k in range(30):
+        t = 0.1 * k
+        link.seen.put_nowait(TargetObservation(1, t, 0.0, 0.0, 0.0, 7.0 * t, 0.0, 1.0))
+    async with (
+        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        asyncio.TaskGroup() as tg,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
+        running = tg.create_task(agent.run())
+        c = agent.counters
+        await until(lambda: c.observations_used + c.observations_merged >= 30)
+        assert c.observations_dropped == 0
+        assert c.observations_used <= 12  # 0.3 s windows over 2.9 s, not 30 updates
+        assert c.observations_merged == 30 - c.observations_used
+        estimate = agent.state.local.estimate()
+        assert estimate is not None
+        assert abs(estimate.x[0] - 7.0 * estimate.t_s) < 1.5
         running.cancel()

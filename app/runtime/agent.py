@@ -24,10 +24,12 @@ from app.adapters.vehicle.link import (
     LinkLost,
     LinkRestored,
     OffboardLostError,
+    TargetObservation,
     VehicleLink,
 )
 from app.core import mission_agent as logic
 from app.core.agent import OwnTelemetry
+from app.core.estimation.backlog import merge_backlog
 from app.core.estimation.messages import Observation
 from app.errors import LinkError
 from app.runtime.events import EventSink
@@ -45,12 +47,15 @@ the agent's messages 18-41 s late), while the newest makes every older one redun
 
 @dataclass(frozen=True, slots=True)
 class AgentRuntimeParams:
-    """Timing of the loop (vehicle time, s) and the altitude to hold (m above home)."""
+    """Timing of the loop (vehicle time, s) and the altitude to hold (m above home).
+    ``merge_window_s``: observations that queued while the agent was busy are merged into one
+    per this much of their time (``merge_backlog``)."""
 
     altitude_m: float | None = None
     status_period_s: float = 0.1
     estimate_period_s: float = 0.2
     retry_offboard_s: float = 2.0
+    merge_window_s: float = 0.3
 
 
 @dataclass
@@ -60,6 +65,7 @@ class AgentCounters:
     offboard_restarts: int = 0
     observations_used: int = 0
     observations_dropped: int = 0
+    observations_merged: int = 0  # queued observations folded into another (merge_backlog)
 
 
 class VehicleAgent:
@@ -194,21 +200,56 @@ class VehicleAgent:
     # --- what the agent hears ---------------------------------------------------------------
 
     async def _camera(self) -> None:
-        async for seen in self._link.observations():
-            obs = Observation(seen.t_s, self.params.sensor, seen.east_m, seen.north_m, seen.sigma_m)
-            await self._use_observation(obs)
-            message = bus.TargetObservation(
-                sender=self.name,
-                t_s=seen.t_s,
-                sensor=f"camera-{self.params.vehicle}",
-                vehicle=self.params.vehicle,
-                east_m=seen.east_m,
-                north_m=seen.north_m,
-                sigma_m=seen.sigma_m
-                if seen.sigma_m is not None and seen.sigma_m > 0.0
-                else self.params.local.default_sigma_m,
-            )
-            await self._bus.publish(topics.observation(self.params.vehicle), message)
+        """The camera's observations, as they come; those that queued while the agent was busy
+        are merged (``merge_backlog``) so that a backlog costs one filter update per
+        ``merge_window_s`` of it instead of one per observation."""
+        pending: list[TargetObservation] = []
+        ready = asyncio.Event()
+        done = False
+
+        async def read() -> None:
+            nonlocal done
+            try:
+                async for seen in self._link.observations():
+                    pending.append(seen)
+                    ready.set()
+            finally:
+                done = True
+                ready.set()
+
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(read(), name=f"{self.name}-camera-read")
+            while not (done and not pending):
+                await ready.wait()
+                ready.clear()
+                batch = pending[:]
+                pending.clear()
+                sensor = self.params.sensor
+                observations = [
+                    Observation(s.t_s, sensor, s.east_m, s.north_m, s.sigma_m) for s in batch
+                ]
+                merged = merge_backlog(
+                    observations, self._runtime.merge_window_s, self.params.local.default_sigma_m
+                )
+                self.counters.observations_merged += len(observations) - len(merged)
+                for obs in merged:
+                    await self._use_observation(obs)
+                    await self._publish_observation(obs)
+
+    async def _publish_observation(self, obs: Observation) -> None:
+        sigma = obs.sigma_m
+        message = bus.TargetObservation(
+            sender=self.name,
+            t_s=obs.t_s,
+            sensor=f"camera-{self.params.vehicle}",
+            vehicle=self.params.vehicle,
+            east_m=obs.east_m,
+            north_m=obs.north_m,
+            sigma_m=sigma
+            if sigma is not None and sigma > 0.0
+            else self.params.local.default_sigma_m,
+        )
+        await self._bus.publish(topics.observation(self.params.vehicle), message)
 
     async def _use_observation(self, obs: Observation) -> None:
         self.state, report = logic.observe(self.state, obs, self.params)

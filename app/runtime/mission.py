@@ -351,6 +351,7 @@ async def run_mission(
         BrokerUrl.parse(broker_url)
     ground: GroundStation | None = None
     links: dict[int, VehicleLink] = {}
+    agents: list[VehicleAgent] = []
     interrupted = False
     wall_start = time.monotonic()
     eventlog = EventLog(out_dir / "events.jsonl")
@@ -412,7 +413,6 @@ async def run_mission(
                 else None,
                 on_snapshot=on_snapshot,
             )
-            agents = []
             buses = [ground_bus]
             for i, link in links.items():
                 name = f"agent-{i}"
@@ -461,7 +461,7 @@ async def run_mission(
     finally:
         # every vehicle is in hold and every log closed by now; write the run folder
         wall_s = time.monotonic() - wall_start
-        result = write_outputs(plan, out_dir, ground, eventlog, links, wall_s, interrupted)
+        result = write_outputs(plan, out_dir, ground, eventlog, links, wall_s, interrupted, agents)
     return result
 
 
@@ -486,6 +486,7 @@ def write_outputs(
     links: dict[int, VehicleLink],
     wall_s: float,
     interrupted: bool,
+    agents: Sequence[VehicleAgent] = (),
 ) -> MissionResult:
     samples = ground.samples if ground is not None else []
     summary = summarize(
@@ -513,6 +514,7 @@ def write_outputs(
             "interrupted": interrupted,
             "events": dict(eventlog.counts),
             "links": counters,
+            "agents": {str(a.params.vehicle): dataclasses.asdict(a.counters) for a in agents},
             "fusion": _fusion_counters(ground),
         }
     )
