@@ -76,6 +76,25 @@ def _fmt(value: object, spec: str = ".1f") -> str:
     return format(value, spec) if isinstance(value, float) and math.isfinite(value) else "-"
 
 
+def _falling_behind(summary: dict[str, object]) -> str | None:
+    """A warning when an agent steered past more than a tenth of its telemetry frames."""
+    agents = summary.get("agents")
+    if not isinstance(agents, dict):
+        return None
+    shares = {}
+    for vehicle, c in agents.items():
+        if isinstance(c, dict) and c.get("ticks", 0) + c.get("frames_skipped", 0) > 0:
+            shares[vehicle] = c.get("frames_skipped", 0) / (c["ticks"] + c["frames_skipped"])
+    if not shares or max(shares.values()) <= 0.1:
+        return None
+    worst = max(shares.values())
+    return (
+        f"warning: the agents fell behind their vehicles (up to {worst:.0%} of the telemetry "
+        "frames skipped): this machine was short of CPU and the figures suffer; lower "
+        "--speedup or run the agents as separate processes"
+    )
+
+
 def report(summary: dict[str, object]) -> str:
     """The run's headline figures, a few lines for the terminal (the full set: summary.json)."""
     conv = summary.get("convergence")
@@ -89,6 +108,9 @@ def report(summary: dict[str, object]) -> str:
             f" spaced {_fmt(conv.get('time_to_spacing_s'))} s,"
             f" both {_fmt(conv.get('time_to_formation_s'))} s"
         )
+    behind = _falling_behind(summary)
+    if behind:
+        lines.append(behind)
     parts = summary.get("parts")
     if isinstance(parts, dict):
         for key, part in parts.items():

@@ -49,13 +49,17 @@ the agent's messages 18-41 s late), while the newest makes every older one redun
 class AgentRuntimeParams:
     """Timing of the loop (vehicle time, s) and the altitude to hold (m above home).
     ``merge_window_s``: observations that queued while the agent was busy are merged into one
-    per this much of their time (``merge_backlog``)."""
+    per this much of their time (``merge_backlog``). ``load_*``: when to warn that the agent
+    skips too many telemetry frames (``VehicleAgent._watch_load``)."""
 
     altitude_m: float | None = None
     status_period_s: float = 0.1
     estimate_period_s: float = 0.2
     retry_offboard_s: float = 2.0
     merge_window_s: float = 0.3
+    load_window_s: float = 10.0
+    load_warn_share: float = 0.2
+    load_warn_every_s: float = 30.0
 
 
 @dataclass
@@ -66,6 +70,15 @@ class AgentCounters:
     observations_used: int = 0
     observations_dropped: int = 0
     observations_merged: int = 0  # queued observations folded into another (merge_backlog)
+    frames_skipped: int = 0  # telemetry frames that queued while a tick ran, steered past
+
+
+@dataclass
+class _LoadWindow:
+    start_t: float | None = None
+    frames: int = 0
+    skipped: int = 0
+    next_warn_t: float = -math.inf
 
 
 class VehicleAgent:
@@ -91,6 +104,7 @@ class VehicleAgent:
         self._next_estimate_t = -math.inf
         self._next_offboard_retry_t = -math.inf
         self._last_t = 0.0
+        self._load = _LoadWindow()
 
     def stand_down(self) -> None:
         """Stop commanding the vehicle (the mission is about to put it in hold)."""
@@ -124,9 +138,14 @@ class VehicleAgent:
             newest = self._link.latest
             frame = newest if newest is not None and newest.t_s > queued.t_s else queued
             t = frame.t_s
+            self._load.frames += 1
             if t <= self._last_t and self.counters.ticks > 0:
-                continue  # another message of the same instant: one tick per vehicle time
+                # another message of the same instant, or one the last tick already skipped
+                self.counters.frames_skipped += 1
+                self._load.skipped += 1
+                continue
             self._last_t = t
+            self._watch_load(t)
             own = OwnTelemetry(
                 frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s
             )
@@ -152,6 +171,33 @@ class VehicleAgent:
             if t >= self._next_status_t:
                 self._next_status_t = t + self._runtime.status_period_s
                 await self._publish_status(t, own)
+
+    def _watch_load(self, t: float) -> None:
+        """Warn (an event, at most every ``load_warn_every_s``) when over the last
+        ``load_window_s`` the loop skipped more than ``load_warn_share`` of its vehicle's
+        telemetry frames: the agent is short of CPU and steers on late data."""
+        w, rt = self._load, self._runtime
+        if w.start_t is None or t < w.start_t:
+            w.start_t, w.frames, w.skipped = t, 0, 0
+            return
+        if t - w.start_t < rt.load_window_s:
+            return
+        share = w.skipped / w.frames if w.frames else 0.0
+        if share > rt.load_warn_share and t >= w.next_warn_t:
+            w.next_warn_t = t + rt.load_warn_every_s
+            self._events.emit(
+                "falling_behind",
+                t,
+                vehicle=self.params.vehicle,
+                skipped_share=round(share, 3),
+                detail=(
+                    f"agent {self.params.vehicle} steered on {1.0 - share:.0%} of its "
+                    f"vehicle's telemetry over the last {t - w.start_t:.0f} s: this machine is "
+                    "short of CPU for the mission; the figures suffer (lower the simulator's "
+                    "speed-up, or run the agents as separate processes)"
+                ),
+            )
+        w.start_t, w.frames, w.skipped = t, 0, 0
 
     async def _send(self, t: float, command: CourseSpeedCommand) -> None:
         try:

@@ -10,6 +10,10 @@ class EventSink(Protocol):
     def emit(self, kind: str, t_s: float, **fields: object) -> None: ...
 
 
+WARNING_KINDS = frozenset({"falling_behind"})
+"""Events logged as warnings (shown on the terminal); the others are logged at INFO."""
+
+
 class LoggingSink:
     """Sends every event to the ``standoff.events`` logger (and to ``inner`` when given)."""
 
@@ -18,6 +22,7 @@ class LoggingSink:
 
     def emit(self, kind: str, t_s: float, **fields: object) -> None:
         detail = " ".join(f"{k}={v}" for k, v in fields.items())
-        log.info("t=%.2f %s %s", t_s, kind, detail)
+        level = logging.WARNING if kind in WARNING_KINDS else logging.INFO
+        log.log(level, "t=%.2f %s %s", t_s, kind, detail)
         if self._inner is not None:
             self._inner.emit(kind, t_s, **fields)

@@ -1,0 +1,148 @@
+"""An agent short of CPU says so: it counts the telemetry frames it steered past, warns with a
+``falling_behind`` event, and ``standoff fly``'s report carries a warning line."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+
+from app.adapters.bus import InProcessBroker, InProcessBus
+from app.adapters.vehicle.link import (
+    CourseSpeedCommand,
+    LinkEvent,
+    TargetObservation,
+    VehicleTelemetry,
+)
+from app.cli.fly import report
+from app.config import load_config
+from app.mission_config import MissionConfig
+from app.runtime.agent import VehicleAgent
+from app.runtime.mission import build_plan
+
+
+def frame(t: float) -> VehicleTelemetry:
+    return VehicleTelemetry(
+        vehicle_id=1,
+        t_s=t,
+        latitude_deg=0.0,
+        longitude_deg=0.0,
+        altitude_m=100.0,
+        relative_altitude_m=100.0,
+        east_m=-1000.0 + 14.0 * t,
+        north_m=150.0,
+        up_m=100.0,
+        course_rad=1.5708,
+        ground_speed_m_s=14.0,
+        v_east_m_s=14.0,
+        v_north_m_s=0.0,
+        climb_rate_m_s=0.0,
+        flight_mode="OFFBOARD",
+        armed=True,
+        in_air=True,
+        link_ok=True,
+    )
+
+
+class BurstyLink:
+    """Telemetry that arrives in bursts the agent cannot keep up with: ``latest`` is the
+    newest frame put, as on a real link whose reader ran while the agent was busy."""
+
+    vehicle_id = 1
+    autopilot_name = "fake"
+    link_ok = True
+
+    def __init__(self) -> None:
+        self.queue: asyncio.Queue[VehicleTelemetry] = asyncio.Queue()
+        self.latest: VehicleTelemetry | None = None
+        self.sent = 0
+
+    def put(self, f: VehicleTelemetry) -> None:
+        self.latest = f
+        self.queue.put_nowait(f)
+
+    async def wait_ready(self, timeout_s: float) -> VehicleTelemetry:
+        raise NotImplementedError
+
+    async def arm(self) -> None: ...
+
+    async def take_off(self, timeout_s: float) -> None: ...
+
+    async def start_offboard(self, first: CourseSpeedCommand) -> None: ...
+
+    async def send(self, command: CourseSpeedCommand) -> None:
+        self.sent += 1
+
+    async def hold(self) -> None: ...
+
+    async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
+        while True:
+            yield await self.queue.get()
+
+    async def observations(self) -> AsyncIterator[TargetObservation]:
+        await asyncio.Event().wait()
+        yield  # type: ignore[misc]
+
+    async def events(self) -> AsyncIterator[LinkEvent]:
+        await asyncio.Event().wait()
+        yield  # type: ignore[misc]
+
+
+class Events:
+    def __init__(self) -> None:
+        self.seen: list[tuple[str, dict[str, object]]] = []
+
+    def emit(self, kind: str, t_s: float, **fields: object) -> None:
+        self.seen.append((kind, fields))
+
+
+async def fly_bursts(burst: int, seconds: float) -> tuple[VehicleAgent, Events, BurstyLink]:
+    plan = build_plan(load_config("hil", MissionConfig))
+    link = BurstyLink()
+    events = Events()
+    async with (
+        InProcessBus(InProcessBroker(), client_id="agent-0") as bus,
+        asyncio.TaskGroup() as tg,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, bus, events)
+        running = tg.create_task(agent.run())
+        k = 0
+        while k * 0.1 < seconds:
+            for _ in range(burst):  # 10 Hz frames, `burst` of them between two turns
+                link.put(frame(0.1 * k))
+                k += 1
+            await asyncio.sleep(0.002)
+        running.cancel()
+    return agent, events, link
+
+
+async def test_an_agent_that_steers_past_most_frames_warns_once_per_period() -> None:
+    agent, events, link = await fly_bursts(burst=5, seconds=45.0)
+    c = agent.counters
+    assert c.frames_skipped > 3 * c.ticks  # 4 of every 5 frames steered past
+    assert link.sent == c.ticks
+    warnings = [f for kind, f in events.seen if kind == "falling_behind"]
+    assert 1 <= len(warnings) <= 2  # over 45 s, at most one per 30 s
+    assert float(warnings[0]["skipped_share"]) > 0.7  # type: ignore[arg-type]
+    assert "short of CPU" in str(warnings[0]["detail"])
+
+
+async def test_an_agent_that_keeps_up_does_not_warn() -> None:
+    agent, events, _ = await fly_bursts(burst=1, seconds=25.0)
+    assert agent.counters.frames_skipped == 0
+    assert not [kind for kind, _ in events.seen if kind == "falling_behind"]
+
+
+def test_the_report_warns_when_an_agent_fell_behind() -> None:
+    summary: dict[str, object] = {
+        "wall_s": 150.0,
+        "mission_t_s": 420.0,
+        "agents": {
+            "0": {"ticks": 4100, "frames_skipped": 80},
+            "1": {"ticks": 2500, "frames_skipped": 1700},
+        },
+    }
+    text = report(summary)
+    assert "warning: the agents fell behind" in text
+    assert "40%" in text
+    summary["agents"] = {"0": {"ticks": 4100, "frames_skipped": 80}}
+    assert "warning" not in report(summary)
