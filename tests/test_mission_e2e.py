@@ -8,9 +8,10 @@ module and several tests read its results:
 
 - the full mission, with garbage injected on the bus on the way: the run folder, the figures,
   and every setpoint the simulator received;
-- a vehicle's radio cut mid-track and restored: it leaves, the other two re-space to 180 degrees,
-  it rejoins;
-- every camera stopped mid-track: the fused estimate is predicted on and the team orbits it;
+- two faults, one after the other, in one longer mission (the target drives on to its end):
+  a vehicle's radio cut mid-track and restored (it leaves, the other two re-space to 180
+  degrees, it rejoins), then, once the three have formed again, every camera stopped (the fused
+  estimate is predicted on and the team orbits it);
 - Ctrl-C (the mission task cancelled): every vehicle in hold, the logs closed, the summary marked.
 """
 
@@ -47,16 +48,19 @@ pytestmark = [pytest.mark.slow, pytest.mark.asyncio(loop_scope="module")]
 
 CONFIG = "test-short"
 SPEEDUP = 3.0  # more than about 3x starves one process on a 2-core machine (offboard failsafe)
-WALL_TIMEOUT_S = 180.0  # one scenario is about 40 s of wall time
+WALL_TIMEOUT_S = 180.0  # the full mission is about 40 s of wall time, the fault run 80 s
 KILLED = 2
-# The faults are injected mid-track once the team has formed (between these mission times):
-# how long gather and adjust take varies from run to run on a loaded machine.
+# The radio is cut mid-track once the team has formed (between these mission times): how long
+# gather and adjust take varies from run to run on a loaded machine.
 FAULT_FROM_S = 64.0
 FAULT_BY_S = 95.0
 RESPACE_S = 52.0  # the phase law needs 25 to 45 s to re-space two (around a 3 m/s target)
-KILL_RUN_END_S = 160.0
-KILL_RUN_LEG_NORTH_M = 300.0  # the target drives on to the end (a stop would stir the spacing)
-BLIND_RUN_END_S = 125.0
+# The cameras are stopped once the three have formed again after the rejoin (25-45 s), at the
+# latest 30 s before the end (as in a run of its own, stopped by 95 s of 125).
+BLIND_BY_S = 200.0
+FAULT_RUN_END_S = 230.0
+# the target waits 60 s and drives on at 3 m/s to the end (a stop would stir the spacing)
+FAULT_RUN_LEG_NORTH_M = 3.0 * (FAULT_RUN_END_S - 60.0)
 INTERRUPT_AT_S = 25.0
 # Course setpoints are computed on a telemetry frame and reach the simulator later: allow the
 # vehicle to have turned at its limit for this long (simulated time) in between.
@@ -229,24 +233,28 @@ class Garbler:
 
 @dataclass
 class WhenFormed:
-    """Runs ``action`` once, at the first check that finds the ground in track with the whole
-    team active, near the circle and roughly spaced (about the fused estimate)."""
+    """Runs ``action`` once, at the first check (every 0.5 s from ``from_s`` to ``by_s``, once
+    ``armed``) that finds the ground in track with the whole team active, near the circle and
+    roughly spaced (about the fused estimate)."""
 
     action: Callable[[MissionContext], None]
+    from_s: float = FAULT_FROM_S
+    by_s: float = FAULT_BY_S
+    armed: Callable[[], bool] = lambda: True
     distance_tolerance_m: float = 10.0
     spacing_tolerance_deg: float = 15.0
     at_s: float | None = None
     snapshot: Snapshot | None = None
 
     def hooks(self, probe: Probe) -> list[tuple[float, Hook]]:
-        n = round((FAULT_BY_S - FAULT_FROM_S) / 0.5)
-        return [
-            (FAULT_FROM_S + 0.5 * k, functools.partial(self.check, probe)) for k in range(n + 1)
-        ]
+        n = round((self.by_s - self.from_s) / 0.5)
+        return [(self.from_s + 0.5 * k, functools.partial(self.check, probe)) for k in range(n + 1)]
 
     def check(self, probe: Probe, ctx: MissionContext) -> None:
         g = ctx.ground.state
-        if self.at_s is not None or g.stage.stage is not Stage.TRACK or g.active != (0, 1, 2):
+        if self.at_s is not None or not self.armed():
+            return
+        if g.stage.stage is not Stage.TRACK or g.active != (0, 1, 2):
             return
         view = team_view(g, ctx.plan.ground)
         if any(abs(e) > self.distance_tolerance_m for e in view.distance_errors_m):
@@ -297,15 +305,19 @@ async def full_run(tmp_path_factory: pytest.TempPathFactory) -> FullRun:
 
 
 @dataclass
-class KillRun:
+class FaultRun:
+    """The radio of vehicle ``KILLED`` cut and restored, then every camera stopped."""
+
     result: MissionResult
     probe: Probe
     killed_at_s: float
     revived_at_s: float
+    blinded_at_s: float
+    at_cut: Snapshot  # when the cameras were stopped
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
-async def kill_run(tmp_path_factory: pytest.TempPathFactory) -> KillRun:
+async def fault_run(tmp_path_factory: pytest.TempPathFactory) -> FaultRun:
     probe = Probe()
     revived: list[float] = []
 
@@ -322,39 +334,24 @@ async def kill_run(tmp_path_factory: pytest.TempPathFactory) -> KillRun:
             ctx.sim.set_link(KILLED, True)
             revived.append(t)
 
-    hooks = [*killer.hooks(probe), *probe.hooks(KILL_RUN_END_S)]
-    hooks += [(FAULT_FROM_S + RESPACE_S + 0.5 * k, revive_when_due) for k in range(80)]
-    config = short_config(KILL_RUN_END_S, KILL_RUN_LEG_NORTH_M)
-    result = await fly(tmp_path_factory.mktemp("kill"), hooks, config)
-    assert killer.at_s is not None, "the team never formed in track: no vehicle was killed"
-    assert revived, "the killed vehicle was never revived"
-    return KillRun(result, probe, killer.at_s, revived[0])
-
-
-@dataclass
-class BlindRun:
-    result: MissionResult
-    probe: Probe
-    blinded_at_s: float
-    at_cut: Snapshot
-
-
-@pytest_asyncio.fixture(scope="module", loop_scope="module")
-async def blind_run(tmp_path_factory: pytest.TempPathFactory) -> BlindRun:
-    probe = Probe()
-
     def blind(ctx: MissionContext) -> None:
         assert ctx.sim is not None
         for i in range(len(ctx.sim.vehicles)):
             ctx.sim.set_camera(i, False)
 
-    blinder = WhenFormed(blind)
-    hooks = [*blinder.hooks(probe), *probe.hooks(BLIND_RUN_END_S)]
-    config = short_config(BLIND_RUN_END_S)
-    result = await fly(tmp_path_factory.mktemp("blind"), hooks, config)
-    assert blinder.at_s is not None, "the team never formed in track: no camera was stopped"
+    # the team is whole again only once the revived vehicle is back on the circle, spaced
+    blinder = WhenFormed(
+        blind, from_s=FAULT_FROM_S + RESPACE_S, by_s=BLIND_BY_S, armed=lambda: bool(revived)
+    )
+    hooks = [*killer.hooks(probe), *blinder.hooks(probe), *probe.hooks(FAULT_RUN_END_S)]
+    hooks += [(FAULT_FROM_S + RESPACE_S + 0.5 * k, revive_when_due) for k in range(80)]
+    config = short_config(FAULT_RUN_END_S, FAULT_RUN_LEG_NORTH_M)
+    result = await fly(tmp_path_factory.mktemp("faults"), hooks, config)
+    assert killer.at_s is not None, "the team never formed in track: no vehicle was killed"
+    assert revived, "the killed vehicle was never revived"
+    assert blinder.at_s is not None, "the team never formed again: no camera was stopped"
     assert blinder.snapshot is not None
-    return BlindRun(result, probe, blinder.at_s, blinder.snapshot)
+    return FaultRun(result, probe, killer.at_s, revived[0], blinder.at_s, blinder.snapshot)
 
 
 # --- the full mission ---------------------------------------------------------------------------
@@ -518,15 +515,15 @@ async def test_garbled_bus_messages_are_counted_and_dropped(full_run: FullRun) -
 # --- a vehicle killed mid-track, and back -------------------------------------------------------
 
 
-async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(kill_run: KillRun) -> None:
-    kill_at, revive_at = kill_run.killed_at_s, kill_run.revived_at_s
-    log = events(kill_run.result.out_dir)
+async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(fault_run: FaultRun) -> None:
+    kill_at, revive_at = fault_run.killed_at_s, fault_run.revived_at_s
+    log = events(fault_run.result.out_dir)
     left = [e for e in log if e["kind"] == "vehicle_left"]
     assert [e["detail"] for e in left] == [f"vehicle {KILLED} left the formation"]
     lost_after_s = build_plan(short_config()).ground.lost_after_s
     assert kill_at < left[0]["t_s"] <= kill_at + lost_after_s + 1.0
     assert any(e["kind"] == "link_lost" and e["vehicle"] == KILLED for e in log)
-    out = kill_run.probe.between(left[0]["t_s"] + 1.0, revive_at)
+    out = fault_run.probe.between(left[0]["t_s"] + 1.0, revive_at)
     assert out
     assert all(s.active == (0, 1) for s in out)
     # the agents heard it: the survivors steer on a team of two
@@ -548,21 +545,22 @@ async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(kill_run: K
     assert all(abs(distance_m(s, i)) < 10.0 for s in out if s.t_s >= settled[0][0] for i in (0, 1))
 
 
-async def test_a_killed_vehicle_rejoins_when_its_link_returns(kill_run: KillRun) -> None:
-    log = events(kill_run.result.out_dir)
-    revive_at = kill_run.revived_at_s
-    joined = [e for e in log if e["kind"] == "vehicle_joined" and e["t_s"] > kill_run.killed_at_s]
+async def test_a_killed_vehicle_rejoins_when_its_link_returns(fault_run: FaultRun) -> None:
+    log = events(fault_run.result.out_dir)
+    revive_at = fault_run.revived_at_s
+    joined = [e for e in log if e["kind"] == "vehicle_joined" and e["t_s"] > fault_run.killed_at_s]
     assert [e["detail"] for e in joined] == [f"vehicle {KILLED} is in the formation"]
     assert revive_at <= joined[0]["t_s"] <= revive_at + 3.0
     assert any(e["kind"] == "link_restored" and e["vehicle"] == KILLED for e in log)
     # it had fallen back to hold: its agent took it back into offboard
     assert any(e["kind"] == "offboard_restart" and e["vehicle"] == KILLED for e in log)
-    back = kill_run.probe.between(joined[0]["t_s"] + 3.0, KILL_RUN_END_S - 0.5)  # before the hold
+    # to just before the end-of-mission hold (the cameras stopped meanwhile)
+    back = fault_run.probe.between(joined[0]["t_s"] + 3.0, FAULT_RUN_END_S - 0.5)
     assert back
     assert all(s.active == (0, 1, 2) for s in back)
     assert all(s.truth.vehicles[KILLED].mode == "offboard" for s in back)
     assert all(a == (0, 1, 2) for s in back for a in s.agent_actives)
-    summary = kill_run.result.summary
+    summary = fault_run.result.summary
     assert not summary["interrupted"]
     assert summary["events"]["mission_complete"] == 1
 
@@ -570,13 +568,13 @@ async def test_a_killed_vehicle_rejoins_when_its_link_returns(kill_run: KillRun)
 # --- observations stopped -----------------------------------------------------------------------
 
 
-async def test_without_observations_the_estimate_is_predicted_on(blind_run: BlindRun) -> None:
-    probe, at_cut, cut_s = blind_run.probe, blind_run.at_cut, blind_run.blinded_at_s
+async def test_without_observations_the_estimate_is_predicted_on(fault_run: FaultRun) -> None:
+    probe, at_cut, cut_s = fault_run.probe, fault_run.at_cut, fault_run.blinded_at_s
     blind = probe.between(cut_s + 2.0, math.inf)
     assert len(blind) >= 25
     assert all(not v.camera_enabled for s in blind for v in s.truth.vehicles)
     # no camera fix reached a vehicle's filter after the cut (10 Hz from about 2 s)
-    links = blind_run.result.summary["links"].values()
+    links = fault_run.result.summary["links"].values()
     assert all(c["observations"] < 10 * (cut_s + 1.0) for c in links)
     assert at_cut.fused_x is not None
     assert at_cut.fused_position_var_m2 is not None
@@ -597,10 +595,10 @@ async def test_without_observations_the_estimate_is_predicted_on(blind_run: Blin
 
 
 async def test_without_observations_the_team_orbits_the_predicted_target(
-    blind_run: BlindRun,
+    fault_run: FaultRun,
 ) -> None:
-    cut_s = blind_run.blinded_at_s
-    samples = [s for s in blind_run.result.samples if s.t_s >= cut_s + 5.0]
+    cut_s = fault_run.blinded_at_s
+    samples = [s for s in fault_run.result.samples if s.t_s >= cut_s + 5.0]
     assert len(samples) >= 200
     errors = []
     for s in samples:
@@ -613,7 +611,7 @@ async def test_without_observations_the_team_orbits_the_predicted_target(
             errors.append(r - 90.0)
     assert math.sqrt(sum(e * e for e in errors) / len(errors)) <= 15.0
     # until just before the end, when every vehicle is put in hold on purpose
-    blind = blind_run.probe.between(cut_s + 2.0, BLIND_RUN_END_S - 0.5)
+    blind = fault_run.probe.between(cut_s + 2.0, FAULT_RUN_END_S - 0.5)
     assert all(stage == "track" for s in blind for stage in s.agent_stages)
     assert all(v.mode == "offboard" for s in blind for v in s.truth.vehicles)
 
