@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import AsyncIterator
 
 from app.adapters.bus import InProcessBroker, InProcessBus
@@ -17,6 +18,7 @@ from app.cli.fly import report
 from app.config import load_config
 from app.mission_config import MissionConfig
 from app.runtime.agent import VehicleAgent
+from app.runtime.events import LoggingSink
 from app.runtime.mission import build_plan
 
 
@@ -116,6 +118,7 @@ async def fly_bursts(burst: int, seconds: float) -> tuple[VehicleAgent, Events, 
 
 
 async def test_an_agent_that_steers_past_most_frames_warns_once_per_period() -> None:
+    # (only the first warning reaches the terminal; the repeats go to the event log)
     agent, events, link = await fly_bursts(burst=5, seconds=45.0)
     c = agent.counters
     assert c.frames_skipped > 3 * c.ticks  # 4 of every 5 frames steered past
@@ -124,6 +127,7 @@ async def test_an_agent_that_steers_past_most_frames_warns_once_per_period() -> 
     assert 1 <= len(warnings) <= 2  # over 45 s, at most one per 30 s
     assert float(warnings[0]["skipped_share"]) > 0.7  # type: ignore[arg-type]
     assert "short of CPU" in str(warnings[0]["detail"])
+    assert [w["repeat"] for w in warnings] == [False, True][: len(warnings)]
 
 
 async def test_an_agent_that_keeps_up_does_not_warn() -> None:
@@ -146,3 +150,13 @@ def test_the_report_warns_when_an_agent_fell_behind() -> None:
     assert "40%" in text
     summary["agents"] = {"0": {"ticks": 4100, "frames_skipped": 80}}
     assert "warning" not in report(summary)
+
+
+def test_only_the_first_warning_of_a_kind_is_logged_as_a_warning(caplog) -> None:
+    sink = LoggingSink()
+    with caplog.at_level(logging.INFO, logger="standoff.events"):
+        sink.emit("falling_behind", 1.0, vehicle=0, repeat=False)
+        sink.emit("falling_behind", 31.0, vehicle=0, repeat=True)
+        sink.emit("stage", 2.0, detail="track")
+    levels = [(r.levelno, "repeat=True" in r.getMessage()) for r in caplog.records]
+    assert levels == [(logging.WARNING, False), (logging.INFO, True), (logging.INFO, False)]

@@ -79,6 +79,7 @@ class _LoadWindow:
     frames: int = 0
     skipped: int = 0
     next_warn_t: float = -math.inf
+    warned: bool = False
 
 
 class VehicleAgent:
@@ -173,7 +174,8 @@ class VehicleAgent:
                 await self._publish_status(t, own)
 
     def _watch_load(self, t: float) -> None:
-        """Warn (an event, at most every ``load_warn_every_s``) when over the last
+        """Warn (an event, at most every ``load_warn_every_s``; ``repeat`` after the first, which
+        alone reaches the terminal) when over the last
         ``load_window_s`` the loop skipped more than ``load_warn_share`` of its vehicle's
         telemetry frames: the agent is short of CPU and steers on late data."""
         w, rt = self._load, self._runtime
@@ -190,13 +192,14 @@ class VehicleAgent:
                 t,
                 vehicle=self.params.vehicle,
                 skipped_share=round(share, 3),
+                repeat=w.warned,
                 detail=(
                     f"agent {self.params.vehicle} steered on {1.0 - share:.0%} of its "
-                    f"vehicle's telemetry over the last {t - w.start_t:.0f} s: this machine is "
-                    "short of CPU for the mission; the figures suffer (lower the simulator's "
-                    "speed-up, or run the agents as separate processes)"
+                    f"telemetry frames over {t - w.start_t:.0f} s: short of CPU, the figures "
+                    "suffer (lower --speedup, or run the agents as separate processes)"
                 ),
             )
+            w.warned = True
         w.start_t, w.frames, w.skipped = t, 0, 0
 
     async def _send(self, t: float, command: CourseSpeedCommand) -> None:

@@ -11,7 +11,8 @@ class EventSink(Protocol):
 
 
 WARNING_KINDS = frozenset({"falling_behind"})
-"""Events logged as warnings (shown on the terminal); the others are logged at INFO."""
+"""Events logged as warnings (shown on the terminal) unless they say ``repeat=True``; the
+others are logged at INFO."""
 
 
 class LoggingSink:
@@ -22,7 +23,8 @@ class LoggingSink:
 
     def emit(self, kind: str, t_s: float, **fields: object) -> None:
         detail = " ".join(f"{k}={v}" for k, v in fields.items())
-        level = logging.WARNING if kind in WARNING_KINDS else logging.INFO
+        warn = kind in WARNING_KINDS and not fields.get("repeat", False)
+        level = logging.WARNING if warn else logging.INFO
         log.log(level, "t=%.2f %s %s", t_s, kind, detail)
         if self._inner is not None:
             self._inner.emit(kind, t_s, **fields)
