@@ -7,6 +7,8 @@ import asyncio
 import logging
 from collections.abc import AsyncIterator
 
+import pytest
+
 from app.adapters.bus import InProcessBroker, InProcessBus
 from app.adapters.vehicle.link import (
     CourseSpeedCommand,
@@ -17,7 +19,7 @@ from app.adapters.vehicle.link import (
 from app.cli.fly import report
 from app.config import load_config
 from app.mission_config import MissionConfig
-from app.runtime.agent import VehicleAgent
+from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.mission import build_plan
 
@@ -57,6 +59,7 @@ class BurstyLink:
         self.queue: asyncio.Queue[VehicleTelemetry] = asyncio.Queue()
         self.latest: VehicleTelemetry | None = None
         self.sent = 0
+        self.latest_age_s = 0.02  # host seconds since the newest frame arrived
 
     def put(self, f: VehicleTelemetry) -> None:
         self.latest = f
@@ -97,7 +100,9 @@ class Events:
         self.seen.append((kind, fields))
 
 
-async def fly_bursts(burst: int, seconds: float) -> tuple[VehicleAgent, Events, BurstyLink]:
+async def fly_bursts(
+    burst: int, seconds: float, runtime: AgentRuntimeParams | None = None
+) -> tuple[VehicleAgent, Events, BurstyLink]:
     plan = build_plan(load_config("hil", MissionConfig))
     link = BurstyLink()
     events = Events()
@@ -105,7 +110,7 @@ async def fly_bursts(burst: int, seconds: float) -> tuple[VehicleAgent, Events, 
         InProcessBus(InProcessBroker(), client_id="agent-0") as bus,
         asyncio.TaskGroup() as tg,
     ):
-        agent = VehicleAgent(plan.agents[0], link, bus, events)
+        agent = VehicleAgent(plan.agents[0], link, bus, events, runtime or AgentRuntimeParams())
         running = tg.create_task(agent.run())
         k = 0
         while k * 0.1 < seconds:
@@ -160,3 +165,11 @@ def test_only_the_first_warning_of_a_kind_is_logged_as_a_warning(caplog) -> None
         sink.emit("stage", 2.0, detail="track")
     levels = [(r.levelno, "repeat=True" in r.getMessage()) for r in caplog.records]
     assert levels == [(logging.WARNING, False), (logging.INFO, True), (logging.INFO, False)]
+
+
+async def test_how_long_frames_waited_is_counted_in_vehicle_seconds() -> None:
+    agent, _, _ = await fly_bursts(burst=1, seconds=3.0, runtime=AgentRuntimeParams(clock_rate=3.0))
+    c = agent.counters
+    assert c.ticks > 10
+    assert c.frame_wait_max_s == pytest.approx(0.06)
+    assert c.frame_wait_sum_s == pytest.approx(0.06 * c.ticks)

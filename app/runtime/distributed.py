@@ -624,7 +624,10 @@ class _Flight:
                 link,
                 self._bus,
                 self._events,
-                AgentRuntimeParams(altitude_m=cfg.link.altitude_m),
+                AgentRuntimeParams(
+                    altitude_m=cfg.link.altitude_m,
+                    clock_rate=cfg.sim.speedup if builtin else 1.0,
+                ),
             )
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(record_tlog(link, tlog), name=f"tlog-{i + 1}")

@@ -427,7 +427,10 @@ async def run_mission(
                         link,
                         agent_bus,
                         events,
-                        AgentRuntimeParams(altitude_m=cfg.link.altitude_m),
+                        AgentRuntimeParams(
+                            altitude_m=cfg.link.altitude_m,
+                            clock_rate=cfg.sim.speedup if builtin else 1.0,
+                        ),
                     )
                 )
             ctx = MissionContext(plan, sim, links, ground, agents, buses)

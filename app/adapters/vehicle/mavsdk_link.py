@@ -365,6 +365,12 @@ class MavsdkVehicleLink:
         return self._latest
 
     @property
+    def latest_age_s(self) -> float | None:
+        """Host seconds since the newest frame arrived (None before the first): how long it has
+        waited for the agent, which on a busy machine is most of the lag it steers with."""
+        return None if self._last_rx is None else self._clock() - self._last_rx
+
+    @property
     def link_ok(self) -> bool:
         return self._link_ok
 
