@@ -1,22 +1,20 @@
 """The agent loop (``VehicleAgent``) around the mission logic: what it does with the bus's messages.
 
-A tiny fake vehicle link (its camera fed by the test, no telemetry) and the in-process bus.
+A fake vehicle link (``tests/fake_link.py``: its camera fed by the test, no telemetry) and the
+in-process bus.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
 from app.adapters.bus import InProcessBroker, InProcessBus, codec, topics
 from app.adapters.vehicle.link import (
-    CourseSpeedCommand,
-    LinkEvent,
     TargetObservation,
-    VehicleTelemetry,
 )
 from app.config import load_config
 from app.core.estimation.messages import GlobalEstimate
@@ -24,45 +22,9 @@ from app.mission_config import MissionConfig
 from app.runtime.agent import VehicleAgent
 from app.runtime.mission import build_plan
 from app.runtime.wire import global_to_bus
+from tests.fake_link import QueueLink
 
 WAIT_S = 5.0
-
-
-class CameraOnlyLink:
-    """A vehicle link whose camera sees what the test puts in ``seen``; no telemetry."""
-
-    vehicle_id = 1
-    autopilot_name = "fake"
-    latest: VehicleTelemetry | None = None
-    link_ok = True
-
-    def __init__(self) -> None:
-        self.seen: asyncio.Queue[TargetObservation] = asyncio.Queue()
-
-    async def wait_ready(self, timeout_s: float) -> VehicleTelemetry:
-        raise NotImplementedError
-
-    async def arm(self) -> None: ...
-
-    async def take_off(self, timeout_s: float) -> None: ...
-
-    async def start_offboard(self, first: CourseSpeedCommand) -> None: ...
-
-    async def send(self, command: CourseSpeedCommand) -> None: ...
-
-    async def hold(self) -> None: ...
-
-    async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
-        await asyncio.Event().wait()
-        yield  # type: ignore[misc]  # never reached: no telemetry
-
-    async def observations(self) -> AsyncIterator[TargetObservation]:
-        while True:
-            yield await self.seen.get()
-
-    async def events(self) -> AsyncIterator[LinkEvent]:
-        await asyncio.Event().wait()
-        yield  # type: ignore[misc]
 
 
 class Events:
@@ -90,7 +52,7 @@ async def test_only_the_newest_of_the_fused_estimates_waiting_is_applied(queued:
     assert params.main is not None
     assert params.main.feedback == "modewise"
     broker = InProcessBroker()
-    link = CameraOnlyLink()
+    link = QueueLink()
     async with (
         InProcessBus(broker, client_id="agent-0") as agent_bus,
         InProcessBus(broker, client_id="ground") as ground,
@@ -131,7 +93,7 @@ async def test_observations_that_queued_while_the_agent_was_busy_are_merged():
     estimate follows the target (7 m/s east)."""
     plan = build_plan(load_config("hil", MissionConfig))
     broker = InProcessBroker()
-    link = CameraOnlyLink()
+    link = QueueLink()
     for k in range(30):
         t = 0.1 * k
         link.seen.put_nowait(TargetObservation(1, t, 0.0, 0.0, 0.0, 7.0 * t, 0.0, 1.0))

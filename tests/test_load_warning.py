@@ -5,15 +5,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator
 
 import pytest
 
 from app.adapters.bus import InProcessBroker, InProcessBus
 from app.adapters.vehicle.link import (
-    CourseSpeedCommand,
-    LinkEvent,
-    TargetObservation,
     VehicleTelemetry,
 )
 from app.cli.fly import report
@@ -22,6 +18,7 @@ from app.mission_config import MissionConfig
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.mission import build_plan
+from tests.fake_link import QueueLink
 
 
 def frame(t: float) -> VehicleTelemetry:
@@ -47,49 +44,11 @@ def frame(t: float) -> VehicleTelemetry:
     )
 
 
-class BurstyLink:
-    """Telemetry that arrives in bursts the agent cannot keep up with: ``latest`` is the
-    newest frame put, as on a real link whose reader ran while the agent was busy."""
+class BurstyLink(QueueLink):
+    """Telemetry in bursts the agent cannot keep up with; the newest frame has waited 0.02 s
+    of host time (``latest_age_s``)."""
 
-    vehicle_id = 1
-    autopilot_name = "fake"
-    link_ok = True
-
-    def __init__(self) -> None:
-        self.queue: asyncio.Queue[VehicleTelemetry] = asyncio.Queue()
-        self.latest: VehicleTelemetry | None = None
-        self.sent = 0
-        self.latest_age_s = 0.02  # host seconds since the newest frame arrived
-
-    def put(self, f: VehicleTelemetry) -> None:
-        self.latest = f
-        self.queue.put_nowait(f)
-
-    async def wait_ready(self, timeout_s: float) -> VehicleTelemetry:
-        raise NotImplementedError
-
-    async def arm(self) -> None: ...
-
-    async def take_off(self, timeout_s: float) -> None: ...
-
-    async def start_offboard(self, first: CourseSpeedCommand) -> None: ...
-
-    async def send(self, command: CourseSpeedCommand) -> None:
-        self.sent += 1
-
-    async def hold(self) -> None: ...
-
-    async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
-        while True:
-            yield await self.queue.get()
-
-    async def observations(self) -> AsyncIterator[TargetObservation]:
-        await asyncio.Event().wait()
-        yield  # type: ignore[misc]
-
-    async def events(self) -> AsyncIterator[LinkEvent]:
-        await asyncio.Event().wait()
-        yield  # type: ignore[misc]
+    latest_age_s = 0.02
 
 
 class Events:
