@@ -57,3 +57,30 @@ class QueueLink:
     async def events(self) -> AsyncIterator[LinkEvent]:
         await asyncio.Event().wait()
         yield  # type: ignore[misc]  # never reached: no events
+
+
+def frame(t_s: float, east_m: float, north_m: float, **changes: object) -> VehicleTelemetry:
+    """A telemetry frame at (east, north), 100 m up, flying east at 14 m/s in offboard;
+    ``changes`` replace any other field."""
+    fields: dict[str, object] = {
+        "vehicle_id": 1,
+        "t_s": t_s,
+        "latitude_deg": 0.0,
+        "longitude_deg": 0.0,
+        "altitude_m": 100.0,
+        "relative_altitude_m": 100.0,
+        "east_m": east_m,
+        "north_m": north_m,
+        "up_m": 100.0,
+        "course_rad": 1.5708,
+        "ground_speed_m_s": 14.0,
+        "v_east_m_s": 14.0,
+        "v_north_m_s": 0.0,
+        "climb_rate_m_s": 0.0,
+        "flight_mode": "OFFBOARD",
+        "armed": True,
+        "in_air": True,
+        "link_ok": True,
+    }
+    fields.update(changes)
+    return VehicleTelemetry(**fields)  # type: ignore[arg-type]

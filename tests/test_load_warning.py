@@ -9,39 +9,13 @@ import logging
 import pytest
 
 from app.adapters.bus import InProcessBroker, InProcessBus
-from app.adapters.vehicle.link import (
-    VehicleTelemetry,
-)
 from app.cli.fly import report
 from app.config import load_config
 from app.mission_config import MissionConfig
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.mission import build_plan
-from tests.fake_link import QueueLink
-
-
-def frame(t: float) -> VehicleTelemetry:
-    return VehicleTelemetry(
-        vehicle_id=1,
-        t_s=t,
-        latitude_deg=0.0,
-        longitude_deg=0.0,
-        altitude_m=100.0,
-        relative_altitude_m=100.0,
-        east_m=-1000.0 + 14.0 * t,
-        north_m=150.0,
-        up_m=100.0,
-        course_rad=1.5708,
-        ground_speed_m_s=14.0,
-        v_east_m_s=14.0,
-        v_north_m_s=0.0,
-        climb_rate_m_s=0.0,
-        flight_mode="OFFBOARD",
-        armed=True,
-        in_air=True,
-        link_ok=True,
-    )
+from tests.fake_link import QueueLink, frame
 
 
 class BurstyLink(QueueLink):
@@ -74,7 +48,8 @@ async def fly_bursts(
         k = 0
         while k * 0.1 < seconds:
             for _ in range(burst):  # 10 Hz frames, `burst` of them between two turns
-                link.put(frame(0.1 * k))
+                t = 0.1 * k
+                link.put(frame(t, -1000.0 + 14.0 * t, 150.0))
                 k += 1
             await asyncio.sleep(0.002)
         running.cancel()

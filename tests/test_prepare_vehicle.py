@@ -7,27 +7,26 @@ from app.config import load_config
 from app.errors import LinkError
 from app.mission_config import MissionConfig
 from app.runtime.mission import build_plan, prepare_vehicle
+from tests.fake_link import frame
 
 
 def frame_at(east_m: float, north_m: float) -> VehicleTelemetry:
-    return VehicleTelemetry(
+    """Vehicle 2 on the ground, disarmed, in HOLD."""
+    return frame(
+        1.0,
+        east_m,
+        north_m,
         vehicle_id=2,
-        t_s=1.0,
-        latitude_deg=0.0,
-        longitude_deg=0.0,
         altitude_m=500.0,
         relative_altitude_m=0.0,
-        east_m=east_m,
-        north_m=north_m,
         up_m=0.0,
         course_rad=0.3,
         ground_speed_m_s=0.0,
         v_east_m_s=0.0,
-        v_north_m_s=0.0,
-        climb_rate_m_s=0.0,
         flight_mode="HOLD",
         armed=False,
         in_air=False,
+        link_ok=True,
     )
 
 
