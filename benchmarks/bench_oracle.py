@@ -20,7 +20,11 @@ true optimum and, because it knows the future and flies an ideal airframe, a ref
 causal controller on the simulator's airframe can beat by much: where it stays above the
 issue's figures, the figures cannot be met from where the 7 m/s leg left the team. ``--lead S``
 starts the oracle S seconds before the segment (still scored over the segment only): what
-knowing the turn in advance and placing the team for it would buy.
+knowing the turn in advance and placing the team for it would buy. ``--blind S`` instead first
+flies the oracle over the S s before the segment against the target's path as far as the
+segment's start and then straight on at its velocity there (what an estimator predicts: the turn
+is not known), and starts the segment's oracle from where that leaves the team: the best a
+controller that tracks the 7 m/s leg optimally, but cannot see the turn coming, could do.
 
 Prints per seed the mission's figures, the oracle's, their ratio, and the team's state at the
 segment's start (distance errors, speeds, adjacent gaps); the means at the end. ``--run`` adds
@@ -33,7 +37,7 @@ import csv
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +52,7 @@ from app.runtime.mission import MissionPlan, build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 Array = NDArray[np.float64]
+BLIND_AFTER_S = 20.0  # how far past the segment's start the blind approach looks (straight on)
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,6 +291,66 @@ def run_figures(run_dir: Path, segment: str) -> tuple[float, float]:
     return float(team["distance_error_m"]["rms"]), float(team["spacing_error_deg"]["rms"])
 
 
+def blind_approach(
+    samples: list[TeamSample],
+    plan: MissionPlan,
+    t_seg: float,
+    args: argparse.Namespace,
+    airframe: Airframe,
+) -> tuple[Array, Array, Array, str]:
+    """The oracle over the ``args.blind`` s before the segment, scored against the target's
+    path up to the segment's start and then as if it drove on at its velocity there for
+    ``BLIND_AFTER_S`` more (what an estimator would predict; the turn is not known): the team's
+    state (position, heading, speed) when the segment starts, and a line about that approach."""
+    dt = args.dt
+    first = min(samples, key=lambda s: abs(s.t_s - (t_seg - args.blind)))
+    t0 = first.t_s
+    k_seg = round((t_seg - t0) / dt)
+    steps = k_seg + round(BLIND_AFTER_S / dt)
+    path = np.array(
+        [
+            [plan.target.state_at(t0 + k * dt).east_m, plan.target.state_at(t0 + k * dt).north_m]
+            for k in range(k_seg + 1)
+        ]
+    )
+    velocity = (path[k_seg] - path[k_seg - 5]) / (5 * dt)
+    ahead = path[k_seg] + velocity * (dt * np.arange(1, steps - k_seg + 1))[:, None]
+    problem = Problem(
+        position=np.array([[v.east_m, v.north_m] for v in first.vehicles]),
+        heading=np.array([paper_angle_from_course(v.course_rad) for v in first.vehicles]),
+        speed=np.array([v.speed_m_s for v in first.vehicles]),
+        target=np.concatenate([path, ahead]),
+        dt_s=dt,
+        radius_m=plan.config.radius_m,
+        airframe=airframe,
+    )
+    t1 = t0 + steps * dt
+    flown = controls_of([s for s in samples if t0 - 1e-6 <= s.t_s <= t1 + 1e-6], t0, problem)
+    best, _ = solve(problem, {"flown": flown}, args.max_iter)
+    before = Problem(
+        problem.position, problem.heading, problem.speed, path, dt, problem.radius_m, airframe
+    )
+    f = best.flight
+    upto = Flight(
+        f.position[: k_seg + 1], f.heading[: k_seg + 1], f.speed[: k_seg + 1], f.free[:k_seg]
+    )
+    n = problem.count
+    replayed = fly(problem, flown[: steps * n].reshape(-1, n), flown[steps * n :].reshape(-1, n))
+    replayed_upto = Flight(
+        replayed.position[: k_seg + 1],
+        replayed.heading[: k_seg + 1],
+        replayed.speed[: k_seg + 1],
+        replayed.free[:k_seg],
+    )
+    d, sp = figures(before, upto)
+    d_flown, sp_flown = figures(before, replayed_upto)
+    line = (
+        f"  blind approach over the {args.blind:g} s before the segment: {d:.2f} m "
+        f"{sp:.2f} deg (the mission's: {d_flown:.2f} m {sp_flown:.2f} deg)"
+    )
+    return f.position[k_seg], f.heading[k_seg], f.speed[k_seg], line
+
+
 def case(
     name: str,
     samples: list[TeamSample],
@@ -315,6 +380,12 @@ def case(
         score_from=max(1, round((seg[0].t_s - t0) / args.dt)),
     )
     n = problem.count
+    approach = None
+    if args.blind > 0.0 and args.lead == 0.0:
+        position, heading, speed, approach = blind_approach(
+            samples, plan, seg[0].t_s, args, airframe
+        )
+        problem = replace(problem, position=position, heading=heading, speed=speed)
     flown = controls_of([s for s in samples if t0 - 1e-6 <= s.t_s <= t1 + 1e-6], t0, problem)
     rng = np.random.default_rng(seed)
     starts = {"flown": flown}
@@ -327,6 +398,7 @@ def case(
     print(
         f"{name}: at the start"
         + (f" (the oracle's, {args.lead:g} s before the segment)" if args.lead else "")
+        + (" (where the blind approach left it)" if approach else "")
         + " distance errors "
         + " ".join(f"{d:+.1f}" for d in dist0[0])
         + " m, speeds "
@@ -335,6 +407,8 @@ def case(
         + " ".join(f"{g:.0f}" for g in gaps)
         + " deg"
     )
+    if approach:
+        print(approach)
     print(
         f"  mission {mission[0]:6.2f} m {mission[1]:5.2f} deg | "
         f"oracle {best.dist_rms_m:6.2f} m {best.spacing_rms_deg:5.2f} deg (from {best.start}; "
@@ -364,6 +438,13 @@ def main() -> None:
         type=float,
         default=0.0,
         help="start the oracle this many seconds before the segment (scored from its start)",
+    )
+    ap.add_argument(
+        "--blind",
+        type=float,
+        default=0.0,
+        help="start from where the oracle flying the S s before the segment, blind to the "
+        "turn, leaves the team",
     )
     ap.add_argument("--dt", type=float, default=0.2)
     ap.add_argument("--max-iter", type=int, default=4000)
