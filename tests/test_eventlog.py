@@ -44,3 +44,20 @@ def test_repeated_drops_are_written_once_per_window_with_a_count(tmp_path):
     assert sum(e["kind"] == "stage" for e in lines) == 2
     # the counts count every event, written or held back
     assert log.counts == {"observation_dropped": 101, "stage": 2}
+
+
+def test_held_back_repeats_are_written_before_the_next_other_event(tmp_path):
+    # an agent's last event must be its file's last line (the multi-process tests read it so):
+    # repeats held back are written before it, not after it when the log closes
+    path = tmp_path / "events.jsonl"
+    with EventLog(path) as log:
+        for k in range(30):
+            log.emit("telemetry_rejected", 0.1 * k, vehicle=0, reason="non-finite position")
+        log.emit("agent_stop", 3.0, vehicle=0)
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [e["kind"] for e in lines] == ["telemetry_rejected"] * 2 + ["agent_stop"]
+    assert lines[1]["repeats"] == 28
+    assert lines[1]["t_s"] == pytest.approx(2.9)
+    times = [e["t_s"] for e in lines]
+    assert times == sorted(times)
+    assert log.counts == {"telemetry_rejected": 30, "agent_stop": 1}

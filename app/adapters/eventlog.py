@@ -6,9 +6,10 @@ log also counts events per kind, which the run summary reports.
 Kinds that can come at the sensor or setpoint rate for as long as their cause lasts (a camera
 that keeps reporting nonsense, a vehicle that refuses every speed command) are written once per
 ``REPEAT_WINDOW_S`` of event time for each of their keys (``REPEATED_KINDS``); the next line
-written for that key says in ``repeats`` how many were held back before it, and closing the log
-writes the last one held back of each key (with the rest in its ``repeats``). The counts count
-them all.
+written for that key says in ``repeats`` how many were held back before it. The last one held
+back of each key (with the rest in its ``repeats``) is written before the next event of another
+kind, and when the log closes, so the file stays in the order the events came and a run's last
+event (``agent_stop``, ``mission_complete``) is its last line. The counts count them all.
 """
 
 import json
@@ -24,6 +25,7 @@ REPEAT_WINDOW_S: Final = 5.0
 REPEATED_KINDS: Final = {
     "observation_dropped": ("vehicle", "outcome"),
     "command_refused": ("vehicle", "reason"),
+    "telemetry_rejected": ("vehicle", "reason"),
 }
 
 
@@ -60,9 +62,7 @@ class EventLog:
         tb: TracebackType | None,
     ) -> None:
         if self._file is not None:
-            for _, held, record in self._repeats.values():
-                if held:
-                    self._write(record | ({"repeats": held - 1} if held > 1 else {}))
+            self._write_held()
             self._file.close()
             self._file = None
 
@@ -82,7 +82,17 @@ class EventLog:
             self._repeats[key] = (t_s, 0, record)
             if last is not None and last[1]:
                 record = record | {"repeats": last[1]}
+        else:
+            self._write_held()
         self._write(record)
+
+    def _write_held(self) -> None:
+        """Write the last event held back of each repeated key (its ``repeats``: the others)."""
+        for key, (_, held, record) in self._repeats.items():
+            if held:
+                self._write(record | ({"repeats": held - 1} if held > 1 else {}))
+                t = record["t_s"]
+                self._repeats[key] = (float(t) if isinstance(t, int | float) else 0.0, 0, record)
 
     def _write(self, record: dict[str, object]) -> None:
         assert self._file is not None
