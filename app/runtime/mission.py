@@ -41,7 +41,6 @@ from app.core.stage import StageParams
 from app.errors import ConfigError, LinkError
 from app.estimator_config import load_estimator
 from app.mission_config import MissionConfig
-from app.report.mission_plots import plot_mission
 from app.report.summary import TeamSample, summarize
 from app.report.track import TrackRow, write_track_csv
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
@@ -543,6 +542,8 @@ def write_outputs(
     )
     _add_stage_column(out_dir / "track.csv", samples)
     if samples:
+        from app.report.mission_plots import plot_mission  # matplotlib: 0.45 s, at the end only
+
         plot_mission(samples, plan.config.radius_m, out_dir)
     return MissionResult(out_dir, summary, samples, interrupted)
 
