@@ -29,7 +29,10 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder."
         ),
     )
-    add_mission_options(p, "MQTT broker, mqtt://[user:pass@]host:port (default: in-process)")
+    add_mission_options(
+        p,
+        "MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus', else in-process)",
+    )
     p.add_argument("--out", type=Path, help="run folder (default: a new folder under runs/)")
     p.add_argument(
         "--connect",
