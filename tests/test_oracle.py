@@ -1,12 +1,26 @@
 """The perfect-foresight optimiser of benchmarks/bench_oracle.py: its gradient, its limits, and
 that it finds what is known to be possible."""
 
+import argparse
+import json
 import math
 
 import numpy as np
 import pytest
 
-from benchmarks.bench_oracle import Airframe, Problem, cost_and_gradient, fly, solve
+from app.config import load_config
+from app.mission_config import MissionConfig
+from app.runtime.mission import build_plan
+from benchmarks.bench_oracle import (
+    Airframe,
+    Problem,
+    case,
+    cost_and_gradient,
+    fly,
+    run_figures,
+    run_samples,
+    solve,
+)
 
 AIRFRAME = Airframe(10.0, 18.0, 2.0, 0.2)
 
@@ -82,3 +96,47 @@ def test_it_cannot_hold_a_circle_tighter_than_the_airframe_turns():
     flight = fly(problem, np.zeros((steps, 1)), np.zeros((steps, 1)))
     assert flight.position.shape == (steps + 1, 1, 2)
     assert 5.0 < best.dist_rms_m < 15.0
+
+
+def test_a_flown_run_folder_is_read_and_its_segment_handed_to_the_oracle(tmp_path, capsys):
+    # a run folder whose team circles the true target exactly (90 m, 120 degrees apart, at
+    # 0.155 rad/s: 11-17 m/s over the ground, within the limits) over 12 s of B-C from 10 s
+    # after the turn: the oracle, started from that flight, stays on the circle
+    plan = build_plan(load_config("hil", MissionConfig))
+    times = np.arange(0.0, 400.0, 0.1)
+    t_b = next(t for t in times if plan.target.segment_at(float(t)) == "B-C")
+    times = times[(times >= t_b + 10.0) & (times <= t_b + 22.0)]
+    rows = []
+    for t in times:
+        here = plan.target.state_at(float(t))
+        later = plan.target.state_at(float(t) + 0.01)
+        for i in range(3):
+            angle = 0.155 * t + 2 * math.pi * i / 3
+            east = here.east_m + 90.0 * math.cos(angle)
+            north = here.north_m + 90.0 * math.sin(angle)
+            ve = (later.east_m - here.east_m) / 0.01 - 90.0 * 0.155 * math.sin(angle)
+            vn = (later.north_m - here.north_m) / 0.01 + 90.0 * 0.155 * math.cos(angle)
+            rows.append(
+                f"{t:.3f},{i},{east},{north},{math.atan2(ve, vn)},{math.hypot(ve, vn)},"
+                f"{here.east_m},{here.north_m},1,nan,nan,track"
+            )
+    header = "t_s,vehicle,east_m,north_m,course_rad,speed_m_s,target_east_m,target_north_m,"
+    header += "active,estimate_east_m,estimate_north_m,stage"
+    (tmp_path / "track.csv").write_text("\n".join([header, *rows]) + "\n")
+    team = {"distance_error_m": {"rms": 5.0}, "spacing_error_deg": {"rms": 2.0}}
+    (tmp_path / "summary.json").write_text(json.dumps({"parts": {"track:B-C": {"team": team}}}))
+    samples = run_samples(tmp_path, plan)
+    assert len(samples) == len(times)
+    assert {s.target_segment for s in samples} == {"B-C"}
+    assert samples[-1].vehicles[2].east_m == pytest.approx(float(rows[-1].split(",")[2]))
+    assert run_figures(tmp_path, "B-C") == (5.0, 2.0)
+    args = argparse.Namespace(segment="B-C", lead=0.0, blind=0.0, dt=0.2, perturbed=0, max_iter=200)
+    limits = plan.config.limits
+    airframe = Airframe(limits.min_speed_m_s, limits.max_speed_m_s, limits.max_accel_m_s2, 0.2)
+    mission_d, mission_s, oracle_d, oracle_s = case(
+        "run", samples, plan, (5.0, 2.0), args, airframe, 0
+    )
+    assert (mission_d, mission_s) == (5.0, 2.0)
+    assert oracle_d < 1.0
+    assert oracle_s < 1.0
+    assert "mission/oracle" in capsys.readouterr().out
