@@ -26,6 +26,8 @@ from collections import defaultdict
 import numpy as np
 
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan, sim_config
 from app.core.agent import OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate, Observation
 from app.core.ground import GroundState, VehicleReport, hear_local, hear_status, tick
@@ -39,8 +41,6 @@ from app.core.mission_agent import (
     initial_agent_state,
     observe,
 )
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan, sim_config
 from sitl.fixedwing import step
 
 TICK_S = 0.1  # telemetry (and control) rate of the built-in simulator: 10 Hz

@@ -19,7 +19,8 @@ from dataclasses import replace
 import numpy as np
 from filterpy.kalman import IMMEstimator, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from app.cli.estimate import generate_scenario
+from app.config.estimator import load_estimator
+from app.config.scenario import generate_scenario
 from app.core.estimation.federated import FEEDBACK_MODES
 from app.core.estimation.imm import IMMParams, imm_init, imm_predict, imm_update
 from app.core.estimation.local import LocalParams, LocalState, local_step
@@ -27,7 +28,6 @@ from app.core.estimation.messages import Observation
 from app.core.estimation.metrics import ErrorSeries, errors, nees_band
 from app.core.estimation.models import MotionModel
 from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
-from app.estimator_config import load_estimator
 from app.runtime.estimation_scenarios import ScenarioData
 
 Row = tuple[float, float, float]  # position RMSE, turn position RMSE, velocity RMSE

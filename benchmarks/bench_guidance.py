@@ -24,6 +24,7 @@ import numpy as np
 from scipy.optimize import brentq, minimize_scalar  # type: ignore[import-untyped]
 
 from app.config import load_config
+from app.config.scenario import ScenarioConfig, build_setup
 from app.core.guidance import curvature, optimal_c
 from app.runtime.fastsim import (
     SimulationSetup,
@@ -32,7 +33,6 @@ from app.runtime.fastsim import (
     run_simulation,
     standoff_figures,
 )
-from app.scenario import ScenarioConfig, build_setup
 
 
 def exact_optimal_c(rd: float, s: float, w: float) -> float:

@@ -30,9 +30,10 @@ from pathlib import Path
 from typing import Any
 
 from app.config import load_config
-from app.mission_config import MissionConfig
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.report.summary import TeamSample
-from app.runtime.mission import MissionResult, build_plan, run_mission
+from app.runtime.mission import MissionResult, run_mission
 from sitl.ports import find_free_udp_base_port
 
 WALL_LIMIT_S = 180.0

@@ -32,8 +32,9 @@ from pathlib import Path
 from typing import Any
 
 from app.config import load_config, resolve_config
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan, run_mission
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
+from app.runtime.mission import run_mission
 from sitl.ports import find_free_udp_base_port
 
 STARTUP_TIMEOUT_S = 60.0

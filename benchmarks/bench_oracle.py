@@ -45,10 +45,10 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize  # type: ignore[import-untyped]
 
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import MissionPlan, build_plan
 from app.core.frames import paper_angle_from_course
-from app.mission_config import MissionConfig
 from app.report.summary import TeamSample, VehicleSample
-from app.runtime.mission import MissionPlan, build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 Array = NDArray[np.float64]

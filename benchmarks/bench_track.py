@@ -44,8 +44,8 @@ from typing import Any
 import numpy as np
 
 from app.config import load_config
-from app.mission_config import MissionConfig
-from app.runtime.mission import MissionPlan, build_plan
+from app.config.mission import MissionConfig
+from app.config.plan import MissionPlan, build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 HOLD_S = 0.1  # the control period: each command acts for one

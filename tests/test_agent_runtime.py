@@ -17,10 +17,10 @@ from app.adapters.vehicle.link import (
     TargetObservation,
 )
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.core.estimation.messages import GlobalEstimate
-from app.mission_config import MissionConfig
 from app.runtime.agent import VehicleAgent
-from app.runtime.mission import build_plan
 from app.runtime.wire import global_to_bus
 from tests.fake_link import QueueLink
 

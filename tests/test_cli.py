@@ -5,8 +5,8 @@ import pytest
 from app.cli import COMMAND_MODULES, _reasons, main
 from app.cli._options import with_overrides
 from app.config import load_config
+from app.config.mission import MissionConfig
 from app.errors import ConfigError
-from app.mission_config import MissionConfig
 
 
 def test_top_level_help_lists_every_subcommand(capsys):

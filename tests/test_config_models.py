@@ -2,7 +2,7 @@ import pytest
 from pydantic import BaseModel
 
 from app.config import validate_config
-from app.config_models import LimitsConfig, TargetConfig
+from app.config.schema import LimitsConfig, TargetConfig
 from app.errors import ConfigError
 
 

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
+from app.config.estimator import load_estimator
 from app.core.estimation.backlog import merge_backlog
 from app.core.estimation.local import LocalParams, initial_state, local_step
 from app.core.estimation.messages import Observation
-from app.estimator_config import load_estimator
 
 
 def cv(t: float) -> tuple[float, float]:

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from app.cli.estimate import ScenarioConfig
 from app.config import load_config
+from app.config.estimator import load_estimator
+from app.config.scenario import EstimationScenarioConfig
 from app.core.estimation.metrics import ErrorSeries, errors, nees_band
 from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
-from app.estimator_config import load_estimator
 from app.runtime.estimation_scenarios import ScenarioData, generate
 
 pytestmark = pytest.mark.slow
@@ -25,7 +25,7 @@ WARM_UP_S = 10.0
 
 
 def _data(name: str, seed: int, duration_s: float | None = None) -> ScenarioData:
-    scenario = load_config(name, ScenarioConfig)
+    scenario = load_config(name, EstimationScenarioConfig)
     return generate(scenario.target.build(), scenario.sensors.build(), seed, duration_s)
 
 

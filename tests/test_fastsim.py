@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from app.config import load_config
+from app.config.scenario import ScenarioConfig, build_setup
 from app.core.agent import AgentState
 from app.runtime.fastsim import (
     SimulationSetup,
@@ -20,7 +21,6 @@ from app.runtime.fastsim import (
     settle_time_s,
     standoff_figures,
 )
-from app.scenario import ScenarioConfig, build_setup
 from sitl.target import Maneuver, TargetPath
 
 

@@ -7,11 +7,11 @@ import pytest
 
 from app.adapters.bus import InProcessBroker, open_bus
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.core.estimation.messages import GlobalEstimate
 from app.core.ground import VehicleReport
-from app.mission_config import MissionConfig
 from app.runtime.ground import GroundRuntimeParams, GroundStation
-from app.runtime.mission import build_plan
 
 
 class Events:

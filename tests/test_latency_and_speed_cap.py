@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.core import guidance
 from app.core.agent import (
     AgentInputs,
@@ -24,8 +26,6 @@ from app.core.agent import (
     agent_step,
     predict_own,
 )
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 

@@ -11,10 +11,10 @@ import pytest
 from app.adapters.bus import InProcessBroker, InProcessBus
 from app.cli.fly import report
 from app.config import load_config
-from app.mission_config import MissionConfig
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import LoggingSink
-from app.runtime.mission import build_plan
 from tests.fake_link import QueueLink, frame
 
 

@@ -3,9 +3,9 @@ import math
 import pytest
 
 from app.config import load_config, validate_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan, sim_config
 from app.errors import ConfigError
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan, sim_config
 
 MISSIONS = ("hil", "px4-sitl", "ardupilot-sitl", "phase-mission")
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from app.config import load_config
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 

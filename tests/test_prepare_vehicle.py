@@ -4,9 +4,10 @@ import pytest
 
 from app.adapters.vehicle.link import CourseSpeedCommand, VehicleTelemetry
 from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.errors import LinkError
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan, prepare_vehicle
+from app.runtime.mission import prepare_vehicle
 from tests.fake_link import frame
 
 

@@ -11,8 +11,8 @@ import pytest
 
 from app.cli import main
 from app.config import load_config
+from app.config.simulator import SitlScenario
 from app.errors import ConfigError
-from app.sitl_config import SitlScenario
 from sitl.ports import find_free_udp_base_port
 
 REPO = Path(__file__).resolve().parent.parent

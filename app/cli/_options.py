@@ -5,8 +5,8 @@ import argparse
 
 from app.adapters.bus import BrokerUrl
 from app.config import validate_config
+from app.config.mission import MissionConfig
 from app.errors import ConfigError
-from app.mission_config import MissionConfig
 
 DEFAULT_CONFIG = "hil"
 

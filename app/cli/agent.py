@@ -8,9 +8,9 @@ from pathlib import Path
 from app.adapters.vehicle.mavsdk_link import validate_url
 from app.cli._options import add_mission_options, broker_url, with_overrides
 from app.config import load_config
-from app.mission_config import MissionConfig
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.runtime.distributed import agent_url, run_agent
-from app.runtime.mission import build_plan
 
 ORDER = 13
 

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pydantic import Field
 
 from app.adapters.estimation_csv import (
     read_measurements,
@@ -21,14 +20,12 @@ from app.adapters.estimation_csv import (
     write_measurements,
     write_truth,
 )
-from app.config import load_config
-from app.config_models import StrictModel, TargetConfig
+from app.config.estimator import load_estimator
+from app.config.scenario import generate_scenario
 from app.core.estimation.local import StepReport
 from app.core.estimation.messages import Observation
 from app.core.estimation.pipeline import RunResult, run_centralised, run_federated
 from app.errors import InputError
-from app.estimator_config import load_estimator
-from app.runtime.estimation_scenarios import ScenarioData, SensorSpec, generate
 
 if TYPE_CHECKING:
     from app.core.estimation.metrics import ErrorSeries
@@ -38,31 +35,6 @@ ORDER = 50
 _log = logging.getLogger(__name__)
 
 _MAX_LOGGED_REJECTIONS = 20
-
-
-class SensorsConfig(StrictModel):
-    n_sensors: int = Field(default=3, ge=1)
-    rate_hz: float = Field(default=10.0, gt=0.0, allow_inf_nan=False)
-    sigma_m: float = Field(default=math.sqrt(10.0), gt=0.0, allow_inf_nan=False)
-    stagger: bool = True
-
-    def build(self) -> SensorSpec:
-        return SensorSpec(self.n_sensors, self.rate_hz, self.sigma_m, self.stagger)
-
-
-class ScenarioConfig(StrictModel):
-    """configs/est-*.toml: a target path and how the vehicles see it."""
-
-    sensors: SensorsConfig = SensorsConfig()
-    target: TargetConfig
-    duration_s: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
-
-
-def generate_scenario(name_or_path: str | Path, seed: int) -> ScenarioData:
-    """Seeded data of a scenario config (``est-fig12``, ``est-fig12-sigma10``, ``est-hil``)."""
-    scenario = load_config(name_or_path, ScenarioConfig)
-    path = scenario.target.build()
-    return generate(path, scenario.sensors.build(), seed, scenario.duration_s)
 
 
 def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:

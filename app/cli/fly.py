@@ -12,8 +12,9 @@ from rich.console import Console
 from app.adapters.live_view import LiveView
 from app.cli._options import add_mission_options, with_overrides
 from app.config import load_config
-from app.mission_config import MissionConfig
-from app.runtime.mission import build_plan, run_mission
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
+from app.runtime.mission import run_mission
 
 ORDER = 10
 

@@ -12,9 +12,9 @@ from app.adapters.live_view import LiveView
 from app.cli._options import add_mission_options, broker_url, with_overrides
 from app.cli.fly import default_out_dir, report
 from app.config import load_config
-from app.mission_config import MissionConfig
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
 from app.runtime.distributed import run_ground
-from app.runtime.mission import build_plan
 
 ORDER = 12
 

@@ -7,6 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from app.config import load_config
+from app.config.scenario import ScenarioConfig, build_setup
 from app.errors import ConfigError
 from app.runtime.fastsim import (
     SimulationResult,
@@ -16,7 +17,6 @@ from app.runtime.fastsim import (
     run_simulation,
     standoff_figures,
 )
-from app.scenario import ScenarioConfig, build_setup
 
 ORDER = 40
 

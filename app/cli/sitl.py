@@ -8,8 +8,8 @@ import sys
 from typing import TextIO
 
 from app.config import load_config
+from app.config.simulator import SitlScenario
 from app.errors import ConfigError, LinkError
-from app.sitl_config import SitlScenario
 from sitl.config import SimConfig
 from sitl.server import SimulatorServer
 

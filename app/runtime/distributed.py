@@ -45,12 +45,12 @@ from app.adapters.live_view import MissionSnapshot
 from app.adapters.tlog import TlogWriter
 from app.adapters.vehicle.link import GeodeticOrigin, VehicleLink
 from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.config.plan import MissionPlan
 from app.errors import BusError, ConfigError, LinkError, StandoffError
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.events import EventSink, LoggingSink
 from app.runtime.ground import GroundRuntimeParams, GroundStation, Measurement
 from app.runtime.mission import (
-    MissionPlan,
     MissionResult,
     observation_sources,
     prepare_vehicle,

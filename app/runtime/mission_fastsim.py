@@ -1,6 +1,6 @@
 """The live mission's logic in one deterministic loop: no MAVLink, no bus, no clock.
 
-``run_mission_sim`` flies the team of a ``MissionPlan`` (``app.runtime.mission.build_plan``) on
+``run_mission_sim`` flies the team of a ``MissionPlan`` (``app.config.plan.build_plan``) on
 the eq. (2) fixed-wing of ``sitl.fixedwing`` around the plan's scripted target, and drives, in
 the order the live mission does, the same pure functions:
 
@@ -27,14 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from app.config.plan import MissionPlan, team_starts
 from app.core import ground as ground_logic
 from app.core import mission_agent as logic
 from app.core.agent import AgentParams, OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.report.summary import TeamSample, VehicleSample, summarize
 from app.runtime import wire
-from app.runtime.mission import MissionPlan
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
+from sitl.fixedwing import FixedWingLimits, step
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,25 +108,6 @@ def _bus_global(estimate: GlobalEstimate) -> GlobalEstimate:
     return wire.global_to_core(wire.global_to_bus(estimate, "ground"))
 
 
-def _starts(plan: MissionPlan) -> list[FixedWingState]:
-    """The team bunched on the standby circle, as ``mission.sim_config`` launches it."""
-    cfg = plan.config
-    sign = 1.0 if cfg.orbit == "ccw" else -1.0
-    out = []
-    for i in range(plan.count):
-        a = sign * math.radians(25.0) * i
-        course = -a if sign > 0 else math.pi - a
-        out.append(
-            FixedWingState(
-                cfg.standby.east_m + cfg.standby.radius_m * math.cos(a),
-                cfg.standby.north_m + cfg.standby.radius_m * math.sin(a),
-                course,
-                cfg.limits.cruise_speed_m_s,
-            )
-        )
-    return out
-
-
 def _truth_estimate(t_s: float, truth: Any) -> GlobalEstimate:
     """The true target as a fused estimate (no uncertainty to speak of): what ``truth_fed``
     agents steer on."""
@@ -157,7 +138,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     sigma = math.sqrt(setup.camera_sigma2_m2)
     rngs = [np.random.default_rng([setup.seed, i]) for i in range(n)]
 
-    vehicles = _starts(plan)
+    vehicles = team_starts(plan)
     states = [logic.initial_agent_state(a) for a in agents]
     gstate = ground_logic.GroundState()
     gparams = plan.ground

@@ -6,7 +6,7 @@ do not share one interpreter (and its lock) and a high speed-up stays faithful o
     python -m app.runtime.sim_process MISSION.json --base-port P [--vehicles N]
 
 MISSION.json is a validated mission config (``MissionConfig``) as JSON; the simulator is the one
-``app.runtime.mission.sim_config`` builds from it. It prints its endpoints and ``running`` once
+``app.config.plan.sim_config`` builds from it. It prints its endpoints and ``running`` once
 the vehicles are up, and stops on SIGINT or SIGTERM.
 """
 
@@ -17,13 +17,13 @@ import sys
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
 
+from app.config.mission import MissionConfig
 from app.errors import LinkError
-from app.mission_config import MissionConfig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     from app.cli.sitl import serve  # the `standoff sitl` server loop (signals, endpoints)
-    from app.runtime.mission import build_plan, sim_config
+    from app.config.plan import build_plan, sim_config
 
     parser = argparse.ArgumentParser(prog="python -m app.runtime.sim_process")
     parser.add_argument("config", type=Path)

@@ -11,26 +11,27 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from app.config_models import (
+from app.config.schema import (
     Finite,
+    GuidanceConfig,
     LimitsConfig,
     NonNegative,
+    PhaseConfig,
     Positive,
     StrictModel,
     TargetConfig,
 )
-from app.sitl_config import CameraModel, OriginConfig, WindModel
+from app.config.simulator import CameraModel, OriginConfig, WindModel
 
 Count = Annotated[int, Field(ge=1, le=50)]
-Fraction = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
 
 
-class GuidanceConfig(StrictModel):
-    """``law``: proposed (optimal c + inverse field), frew (c = 2) or fixed (``c``), flown to
-    the circle (gather, adjust). In the track stage the inverse-field switch is off and
-    ``track_law`` / ``track_orbit_plan`` apply: ``circle`` is the paper's orbit, ``ellipse``
-    the flyable orbit planned around a target too fast for the circle (docs/guidance.md);
-    ``track_law = "paper"`` flies the track stage exactly like the approach.
+class MissionGuidanceConfig(GuidanceConfig):
+    """The guidance law (``GuidanceConfig``) flown to the circle (gather, adjust). In the track
+    stage the inverse-field switch is off and ``track_law`` / ``track_orbit_plan`` apply:
+    ``circle`` is the paper's orbit, ``ellipse`` the flyable orbit planned around a target too
+    fast for the circle (docs/guidance.md); ``track_law = "paper"`` flies the track stage
+    exactly like the approach.
     ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
     moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
     ``latency_s``: the time from a telemetry frame until its command starts to act on the
@@ -39,31 +40,18 @@ class GuidanceConfig(StrictModel):
     (both 0: the paper's loop). The default latency, 0.01 s, is what setpoints to the built-in
     simulator were measured to take (docs/guidance.md); set it for a slower link."""
 
-    law: Literal["proposed", "frew", "fixed"] = "proposed"
-    c: Positive | None = None
-    feed_forward: bool = True
-    curvature_margin: Fraction = 1.0
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
     latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
 
-    @model_validator(mode="after")
-    def _fixed_needs_c(self) -> "GuidanceConfig":
-        if self.law == "fixed" and self.c is None:
-            raise ValueError("law 'fixed' needs c")
-        return self
 
+class MissionPhaseConfig(PhaseConfig):
+    """Phase keeping (``PhaseConfig``) in gather and adjust; ``track_gain_per_s`` replaces the
+    gain in the track stage (None: the same)."""
 
-class PhaseConfig(StrictModel):
-    """Phase keeping (eq. 24-28): ``gain_per_s`` is k of eq. (24) in gather and adjust;
-    ``track_gain_per_s`` replaces it in the track stage (None: the same)."""
-
-    law: Literal["paper", "frew", "none"] = "paper"
-    gain_per_s: NonNegative = 0.1
     track_gain_per_s: NonNegative | None = None
-    predictive: bool = True
 
 
 class StandbyConfig(StrictModel):
@@ -153,8 +141,8 @@ class MissionConfig(StrictModel):
     end_s: Positive | None = None
     tail_s: NonNegative = 30.0
     limits: LimitsConfig
-    guidance: GuidanceConfig = GuidanceConfig()
-    phase: PhaseConfig = PhaseConfig()
+    guidance: MissionGuidanceConfig = MissionGuidanceConfig()
+    phase: MissionPhaseConfig = MissionPhaseConfig()
     standby: StandbyConfig
     stages: StagesConfig = StagesConfig()
     target: TargetConfig

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from app.config_models import (
+from app.config.schema import (
     Finite,
     LimitsConfig,
     NonNegative,

@@ -9,8 +9,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from app.config import load_config
-from app.config_models import StrictModel
+from app.config.loading import load_config
+from app.config.schema import StrictModel
 from app.core.estimation.federated import FeedbackMode, MainParams
 from app.core.estimation.imm import IMMParams
 from app.core.estimation.local import LocalParams

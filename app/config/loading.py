@@ -8,7 +8,7 @@ from pydantic import BaseModel, ValidationError
 
 from app.errors import ConfigError
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 

@@ -1,4 +1,5 @@
-"""Validated config pieces shared by several commands: vehicle limits, starts, target paths.
+"""Validated config pieces shared by several files: vehicle limits, starts, target paths, and the
+guidance and phase laws.
 
 Angles are degrees in files (as operators write them) and radians once built into core values.
 """
@@ -167,3 +168,33 @@ TargetConfig = Annotated[
     WaypointTargetConfig | ManeuverTargetConfig | StationaryTargetConfig,
     Field(discriminator="kind"),
 ]
+
+
+Fraction = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
+
+
+class GuidanceConfig(StrictModel):
+    """The guidance law flown to the circle: ``proposed`` (optimal c + inverse field), ``frew``
+    (c = 2) or ``fixed`` (needs ``c``); ``feed_forward`` adds the field's own course rate;
+    ``curvature_margin`` is the share of the turn-rate limit the optimal c may use."""
+
+    law: Literal["proposed", "frew", "fixed"] = "proposed"
+    c: Positive | None = None
+    feed_forward: bool = True
+    curvature_margin: Fraction = 1.0
+
+    @model_validator(mode="after")
+    def _fixed_needs_c(self) -> Self:
+        if self.law == "fixed" and self.c is None:
+            raise ValueError("law 'fixed' needs c")
+        return self
+
+
+class PhaseConfig(StrictModel):
+    """Phase keeping (eq. 24-28): ``law`` paper (seat law), frew (neighbour law) or none;
+    ``gain_per_s`` is k of eq. (24); ``predictive`` steers on the phase each vehicle will have
+    when it reaches the circle (an improvement; false: the paper's literal law)."""
+
+    law: Literal["paper", "frew", "none"] = "paper"
+    gain_per_s: NonNegative = 0.1
+    predictive: bool = True

@@ -1,4 +1,5 @@
-"""Scenario files for ``standoff simulate``: validated TOML built on the shared config models.
+"""Scenario files: ``standoff simulate``'s numerical experiments (``configs/sim-*.toml``,
+``phase*.toml``) and ``standoff estimate``'s estimation scenarios (``configs/est-*.toml``).
 
 A scenario names the standoff radius and orbit, the vehicles' limits and starts
 (``LimitsConfig``, ``VehicleStartConfig``: metres east/north of the origin, course in degrees
@@ -6,12 +7,17 @@ clockwise from north), the target (``TargetConfig``), the guidance and phase law
 step and duration. ``build_setup`` turns it into a ``SimulationSetup`` for the fast simulation.
 """
 
+import math
+from pathlib import Path
 from typing import Literal
 
 from pydantic import Field
 
-from app.config_models import (
+from app.config.loading import load_config
+from app.config.schema import (
+    GuidanceConfig,
     LimitsConfig,
+    PhaseConfig,
     Positive,
     StationaryTargetConfig,
     StrictModel,
@@ -19,25 +25,8 @@ from app.config_models import (
     VehicleStartConfig,
 )
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams
+from app.runtime.estimation_scenarios import ScenarioData, SensorSpec, generate
 from app.runtime.fastsim import SimulationSetup
-
-
-class GuidanceConfig(StrictModel):
-    """``law``: proposed (optimal c + ILVF), frew (c = 2) or fixed (needs ``c``)."""
-
-    law: Literal["proposed", "frew", "fixed"] = "proposed"
-    c: Positive | None = None
-    feed_forward: bool = True
-    curvature_margin: float = Field(default=1.0, gt=0.0, le=1.0)
-
-
-class PhaseConfig(StrictModel):
-    """``law``: paper (seat law, eq. 24-28), frew (neighbour law) or none; ``gain_per_s`` is k of
-    eq. (24); ``predictive`` steers on the phase each vehicle will have on the circle."""
-
-    law: Literal["paper", "frew", "none"] = "paper"
-    gain_per_s: float = Field(default=0.05, ge=0.0, allow_inf_nan=False)
-    predictive: bool = False
 
 
 class ScenarioConfig(StrictModel):
@@ -82,3 +71,28 @@ def build_setup(scenario: ScenarioConfig) -> SimulationSetup:
         dt_s=scenario.dt_s,
         duration_s=scenario.duration_s,
     )
+
+
+class SensorsConfig(StrictModel):
+    n_sensors: int = Field(default=3, ge=1)
+    rate_hz: float = Field(default=10.0, gt=0.0, allow_inf_nan=False)
+    sigma_m: float = Field(default=math.sqrt(10.0), gt=0.0, allow_inf_nan=False)
+    stagger: bool = True
+
+    def build(self) -> SensorSpec:
+        return SensorSpec(self.n_sensors, self.rate_hz, self.sigma_m, self.stagger)
+
+
+class EstimationScenarioConfig(StrictModel):
+    """configs/est-*.toml: a target path and how the vehicles see it."""
+
+    sensors: SensorsConfig = SensorsConfig()
+    target: TargetConfig
+    duration_s: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
+
+
+def generate_scenario(name_or_path: str | Path, seed: int) -> ScenarioData:
+    """Seeded data of a scenario config (``est-fig12``, ``est-fig12-sigma10``, ``est-hil``)."""
+    scenario = load_config(name_or_path, EstimationScenarioConfig)
+    path = scenario.target.build()
+    return generate(path, scenario.sensors.build(), seed, scenario.duration_s)

@@ -1,0 +1,16 @@
+"""Configuration: validated TOML files built into the values every part of the mission needs.
+
+- ``loading``: finding a file by name or path, parsing and validating it (one-line errors);
+- ``schema``: the pieces several files share (strict models, vehicle limits, starts, targets,
+  the guidance and phase laws);
+- ``mission``: a mission file (``standoff fly``, ``ground``, ``agent``);
+- ``plan``: a mission file built into the core parameters of every part, before any I/O;
+- ``simulator``: a built-in simulator scenario (``standoff sitl``);
+- ``estimator``: the target estimator's parameters (``configs/estimator.toml``);
+- ``scenario``: a numerical experiment (``standoff simulate``) and an estimation scenario
+  (``standoff estimate --generate``).
+"""
+
+from app.config.loading import CONFIG_DIR, load_config, resolve_config, validate_config
+
+__all__ = ["CONFIG_DIR", "load_config", "resolve_config", "validate_config"]

@@ -1,0 +1,168 @@
+"""A mission file built into the core parameters of every part of the mission, before any I/O.
+
+``build_plan`` turns a validated ``MissionConfig`` into the agents' and the ground station's
+parameters, the target's path, the end time and the setpoint limits; ``team_starts`` is where
+the team is launched (bunched on the standby circle); ``sim_config`` is the built-in simulator
+that flies a plan.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+from app.adapters.vehicle.autopilots import SetpointLimits
+from app.config.estimator import load_estimator
+from app.config.mission import MissionConfig
+from app.core.agent import AgentParams, GuidanceParams, PhaseParams
+from app.core.ground import GroundParams
+from app.core.mission_agent import MissionAgentParams
+from app.core.stage import StageParams
+from app.errors import ConfigError
+from sitl.config import SimConfig, VehicleConfig
+from sitl.fixedwing import FixedWingState
+from sitl.target import TargetPath
+
+#: the angle between two neighbours on the standby circle at launch (rad)
+LAUNCH_SPACING_RAD = math.radians(25.0)
+
+
+@dataclass(frozen=True, slots=True)
+class MissionPlan:
+    """Everything built from the config, before any I/O."""
+
+    config: MissionConfig
+    target: TargetPath
+    end_t_s: float
+    agents: tuple[MissionAgentParams, ...]
+    ground: GroundParams
+    setpoint_limits: SetpointLimits
+
+    @property
+    def count(self) -> int:
+        return len(self.agents)
+
+
+def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPlan:
+    """Core parameters of every part; raises ConfigError when they do not fit together."""
+    n = vehicles or config.vehicles
+    lim = config.limits
+    try:
+        target = config.target.build()
+        envelope = lim.envelope()
+        g = config.guidance
+        guidance = GuidanceParams(
+            radius_m=config.radius_m,
+            orbit=config.orbit,
+            law=g.law,
+            c=g.c,
+            feed_forward=g.feed_forward,
+            curvature_margin=g.curvature_margin,
+        )
+        phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
+        track_gain = config.phase.track_gain_per_s
+        track_phase = phase if track_gain is None else replace(phase, gain_per_s=track_gain)
+        track_guidance = replace(
+            guidance,
+            law=g.law if g.track_law == "paper" else g.track_law,
+            inverse_field=False,
+            orbit_plan=g.track_orbit_plan,
+            speed_cap=g.track_speed_cap,
+        )
+        standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
+        estimator = load_estimator(config.estimator.config)
+        local, main = estimator.local, estimator.main
+        agents = tuple(
+            MissionAgentParams(
+                vehicle=i,
+                agent=AgentParams(i, envelope, guidance, phase),
+                standby=AgentParams(0, envelope, standby, PhaseParams("none")),
+                standby_east_m=config.standby.east_m,
+                standby_north_m=config.standby.north_m,
+                local=local,
+                main=main if main.feedback != "none" else None,
+                track=AgentParams(i, envelope, track_guidance, track_phase),
+                use_target_accel=config.estimator.use_target_accel,
+                latency_s=g.latency_s,
+                hold_s=g.hold_s,
+                moving_speed_m_s=config.stages.moving_speed_m_s,
+            )
+            for i in range(n)
+        )
+        s = config.stages
+        ground = GroundParams(
+            vehicles=tuple(range(n)),
+            radius_m=config.radius_m,
+            tracking_command_t_s=config.tracking_command_s,
+            main=main,
+            fuse_period_s=config.estimator.fuse_period_s,
+            feedback_period_s=config.estimator.allocation_period_s,
+            stages=StageParams(
+                arrive_tolerance_m=s.arrive_tolerance_m,
+                radius_tolerance_m=s.radius_tolerance_m,
+                spacing_tolerance_rad=math.radians(s.spacing_tolerance_deg),
+                dwell_s=s.dwell_s,
+                moving_speed_m_s=s.moving_speed_m_s,
+            ),
+            lost_after_s=max(2.0, 3.0 / config.sim.telemetry_rate_hz),
+        )
+        # The agent's command already keeps the implied course rate k (command - course) within
+        # the limit (agent_step); the link's own course-change limiter would clip the lag
+        # compensation, so the link checks speed and finiteness only.
+        limits = SetpointLimits(lim.min_speed_m_s, lim.max_speed_m_s, None, lim.max_accel_m_s2)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
+    end = config.end_s if config.end_s is not None else target.duration_s + config.tail_s
+    return MissionPlan(config, target, end, agents, ground, limits)
+
+
+def team_starts(plan: MissionPlan) -> list[FixedWingState]:
+    """The team at launch: bunched on the standby circle, ``LAUNCH_SPACING_RAD`` apart, each
+    flying along the circle in the orbit's direction at cruise speed."""
+    cfg = plan.config
+    sign = 1.0 if cfg.orbit == "ccw" else -1.0
+    out = []
+    for i in range(plan.count):
+        a = sign * LAUNCH_SPACING_RAD * i
+        course = -a if sign > 0 else math.pi - a
+        out.append(
+            FixedWingState(
+                cfg.standby.east_m + cfg.standby.radius_m * math.cos(a),
+                cfg.standby.north_m + cfg.standby.radius_m * math.sin(a),
+                course,
+                cfg.limits.cruise_speed_m_s,
+            )
+        )
+    return out
+
+
+def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
+    """The built-in simulator for a plan: the team launched bunched on the standby circle."""
+    cfg = plan.config
+    vehicles = tuple(
+        VehicleConfig(
+            limits=cfg.limits.build(),
+            start=start,
+            cruise_speed_m_s=cfg.limits.cruise_speed_m_s,
+            altitude_m=cfg.link.altitude_m + 10.0 * i,
+        )
+        for i, start in enumerate(team_starts(plan))
+    )
+    try:
+        return SimConfig(
+            vehicles=vehicles,
+            target=plan.target,
+            origin_lat_deg=cfg.origin.lat_deg,
+            origin_lon_deg=cfg.origin.lon_deg,
+            origin_alt_m=cfg.origin.alt_m,
+            base_port=base_port,
+            speedup=cfg.sim.speedup,
+            seed=cfg.sim.seed,
+            physics_dt_s=cfg.sim.physics_dt_s,
+            telemetry_rate_hz=cfg.sim.telemetry_rate_hz,
+            camera=cfg.sim.camera.build(),
+            wind=cfg.sim.wind.build(),
+            # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a
+            # scheduling hiccup of a loaded machine at a speed-up, trip the offboard failsafe
+            offboard_timeout_min_wall_s=1.0,
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
