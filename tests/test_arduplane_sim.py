@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from app.adapters.vehicle.autopilots import SetpointLimits
-from app.adapters.vehicle.link import CourseSpeedCommand, LeftOffboard, OffboardLostError
-from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
+from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.core.frames import wrap_pi
 from app.errors import LinkError
+from app.runtime.ports.vehicle import CourseSpeedCommand, LeftOffboard, OffboardLostError
 from sitl.arduplane import (
     GUIDED,
     MAV_CMD_GUIDED_CHANGE_ALTITUDE,

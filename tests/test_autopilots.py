@@ -14,23 +14,19 @@ from mavsdk.plugins.offboard import OffboardError, OffboardResult
 from mavsdk.plugins.param import ParamError, ParamResult
 from mavsdk.vehicle import Vehicle
 
-from app.adapters.vehicle.autopilots import (
-    ArduPlaneAdapter,
-    Px4FixedWingAdapter,
-    SentSetpoint,
-    SetpointLimits,
+from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter, arduplane_mode_name
+from app.adapters.vehicle.autopilots.base import (
     VehicleState,
-    VelocityAdapter,
-    arduplane_mode_name,
     choose_autopilot,
     command_long,
     course_deg_0_360,
-    limit_setpoint,
-    px4_mode_name,
 )
-from app.adapters.vehicle.link import CourseSpeedCommand, UnsupportedVehicleError
+from app.adapters.vehicle.autopilots.limits import SentSetpoint, SetpointLimits, limit_setpoint
+from app.adapters.vehicle.autopilots.px4 import Px4FixedWingAdapter, px4_mode_name
+from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.core.frames import wrap_pi
 from app.errors import LinkError
+from app.runtime.ports.vehicle import CourseSpeedCommand, UnsupportedVehicleError
 
 LIMITS = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
 STATE = VehicleState(t_s=12.0, course_rad=0.0, relative_altitude_m=100.0)

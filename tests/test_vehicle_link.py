@@ -10,22 +10,20 @@ import pytest
 from mavsdk.asyncio import MavsdkConnectionError
 from mavsdk.plugins.action import ActionError, ActionResult
 
-from app.adapters.vehicle.autopilots import SetpointLimits, VelocityAdapter
-from app.adapters.vehicle.link import (
+from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
+from app.adapters.vehicle.mavsdk.broadcast import Broadcast
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
+from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
+from app.adapters.vehicle.mavsdk.logs import RepeatLimiter
+from app.adapters.vehicle.mavsdk.urls import validate_url
+from app.errors import ConfigError, LinkError
+from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
     GeodeticOrigin,
     LinkLost,
     VehicleClockReset,
 )
-from app.adapters.vehicle.mavsdk_link import (
-    LinkConfig,
-    MavsdkHub,
-    MavsdkVehicleLink,
-    RepeatLimiter,
-    _Broadcast,
-    validate_url,
-)
-from app.errors import ConfigError, LinkError
 from sitl.ports import find_free_udp_base_port
 
 ORIGIN = GeodeticOrigin(47.397742, 8.545594, 488.0)
@@ -103,7 +101,7 @@ def test_origin_rejects_impossible_coordinates(lat, lon):
 
 
 async def test_a_subscription_sees_what_is_published_after_the_call_until_close():
-    broadcast: _Broadcast[int] = _Broadcast("test", 8)
+    broadcast: Broadcast[int] = Broadcast("test", 8)
     broadcast.publish(0)  # before anyone listens: nobody gets it
     subscription = broadcast.subscribe()
     broadcast.publish(1)  # before the first read: kept
@@ -113,7 +111,7 @@ async def test_a_subscription_sees_what_is_published_after_the_call_until_close(
 
 
 async def test_a_lagging_subscriber_loses_the_oldest_items_counted():
-    broadcast: _Broadcast[int] = _Broadcast("test", 3)
+    broadcast: Broadcast[int] = Broadcast("test", 3)
     subscription = broadcast.subscribe()
     for item in range(5):
         broadcast.publish(item)
@@ -123,7 +121,7 @@ async def test_a_lagging_subscriber_loses_the_oldest_items_counted():
 
 
 async def test_a_closed_subscription_no_longer_receives():
-    broadcast: _Broadcast[int] = _Broadcast("test", 3)
+    broadcast: Broadcast[int] = Broadcast("test", 3)
     async with aclosing(broadcast.subscribe()) as subscription:
         broadcast.publish(1)
         assert await anext(subscription) == 1

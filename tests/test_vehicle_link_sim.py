@@ -10,8 +10,12 @@ from contextlib import aclosing
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from app.adapters.vehicle.autopilots import SetpointLimits
-from app.adapters.vehicle.link import (
+from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
+from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
+from app.core.frames import wrap_pi
+from app.errors import LinkError
+from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
     GeodeticOrigin,
     LeftOffboard,
@@ -23,9 +27,6 @@ from app.adapters.vehicle.link import (
     VehicleLink,
     VehicleTelemetry,
 )
-from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub, MavsdkVehicleLink
-from app.core.frames import wrap_pi
-from app.errors import LinkError
 from sitl.server import SimulatorServer
 from tests.sitl_fixtures import running_sim, sim_config
 

@@ -5,7 +5,7 @@ import asyncio
 import sys
 from pathlib import Path
 
-from app.adapters.vehicle.mavsdk_link import validate_url
+from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.cli._options import add_mission_options, broker_url, with_overrides
 from app.config import load_config
 from app.config.mission import MissionConfig

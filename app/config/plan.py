@@ -9,7 +9,7 @@ that flies a plan.
 import math
 from dataclasses import dataclass, replace
 
-from app.adapters.vehicle.autopilots import SetpointLimits
+from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams

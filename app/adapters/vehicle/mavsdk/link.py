@@ -1,59 +1,49 @@
-"""The vehicle link over MAVSDK 4.x: one ``MavsdkHub`` (one Mavsdk, many connections) and one
-``MavsdkVehicleLink`` per MAVLink system id.
+"""One vehicle over MAVSDK 4.x: the link's state machine (telemetry, offboard, link loss).
 
 Kinematic telemetry is read from GLOBAL_POSITION_INT through MavlinkDirect, so that every frame
 carries the vehicle's own ``time_boot_ms`` with a consistent position and velocity; flight mode and
 armed state come from the autopilot's HEARTBEAT (decoded by the autopilot adapter); health and
-in-air from the Telemetry plugin; target observations from CAMERA_TRACKING_GEO_STATUS. Every
-MAVSDK exception is translated into ``LinkError`` here, with ``from exc``.
+in-air from the Telemetry plugin; target observations from CAMERA_TRACKING_GEO_STATUS. The
+messages are decoded by ``app.adapters.vehicle.mavsdk.telemetry``. Every MAVSDK exception is
+translated into ``LinkError`` here, with ``from exc``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
-import threading
 import time
-from collections.abc import AsyncIterator, Callable, Iterable
-from contextlib import AsyncExitStack, aclosing, asynccontextmanager
+from collections.abc import Callable
+from contextlib import AsyncExitStack, aclosing
 from dataclasses import dataclass, field, replace
 from types import TracebackType
-from typing import Any, Final, Generic, TypeVar
-from urllib.parse import urlsplit
+from typing import Any
 
-from mavsdk import LogLevel, log_subscribe
-from mavsdk.asyncio import (
-    ComponentType,
-    Configuration,
-    Mavsdk,
-    MavsdkConnectionError,
-    MavsdkError,
-    System,
-)
+from mavsdk.asyncio import MavsdkError, System
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+from pymavlink.dialects.v20 import common as mavlink
 
-from app.adapters.vehicle.autopilots import (
-    MAV_MODE_FLAG_SAFETY_ARMED,
+from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
+from app.adapters.vehicle.autopilots.base import (
     MAVSDK_GCS_SYSTEM_ID,
-    ArduPlaneAdapter,
     AutopilotAdapter,
     AutopilotName,
-    Px4FixedWingAdapter,
-    SentSetpoint,
-    SetpointLimits,
     VehicleState,
-    VelocityAdapter,
     choose_autopilot,
-    limit_setpoint,
 )
-from app.adapters.vehicle.link import (
+from app.adapters.vehicle.autopilots.limits import SentSetpoint, SetpointLimits, limit_setpoint
+from app.adapters.vehicle.autopilots.px4 import Px4FixedWingAdapter
+from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
+from app.adapters.vehicle.mavsdk import telemetry
+from app.adapters.vehicle.mavsdk.broadcast import Broadcast, Subscription
+from app.errors import LinkError
+from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
     GeodeticOrigin,
     LeftOffboard,
@@ -66,176 +56,8 @@ from app.adapters.vehicle.link import (
     VehicleClockReset,
     VehicleTelemetry,
 )
-from app.core.frames import course_from_velocity
-from app.errors import ConfigError, LinkError
 
 log = logging.getLogger(__name__)
-
-URL_SCHEMES: Final = ("udpin", "udpout", "tcp", "tcpin", "tcpout", "serial")
-MAV_COMP_ID_AUTOPILOT1: Final = 1
-MAV_COMP_ID_CAMERA: Final = 100
-CAMERA_TRACKING_STATUS_FLAGS_ACTIVE: Final = 1
-CAMERA_TRACKING_STATUS_FLAGS_ERROR: Final = 2
-UINT16_MAX: Final = 65535
-
-T = TypeVar("T")
-
-
-def validate_url(url: str) -> str:
-    """A MAVSDK connection URL, checked: ``udpin://host:port``, ``udpout://host:port``,
-    ``tcp(in|out)://host:port`` (``tcp://`` is deprecated in 4.1 but works) or
-    ``serial:///dev/tty...:baud``. Raises ``ConfigError`` with the bad URL otherwise."""
-    parts = urlsplit(url)
-    if parts.scheme not in URL_SCHEMES:
-        raise ConfigError(
-            f"vehicle URL {url!r}: scheme must be one of {', '.join(URL_SCHEMES)} "
-            "(e.g. udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600)"
-        )
-    if parts.scheme == "serial":
-        path, _, baud = parts.path.rpartition(":")
-        if not path or not baud.isdigit():
-            raise ConfigError(f"vehicle URL {url!r}: expected serial:///dev/<device>:<baud>")
-        return url
-    try:
-        port = parts.port
-    except ValueError as exc:
-        raise ConfigError(f"vehicle URL {url!r}: bad port") from exc
-    if port is None or parts.hostname is None:
-        raise ConfigError(f"vehicle URL {url!r}: expected {parts.scheme}://<host>:<port>")
-    if not 1 <= port <= 65535:
-        raise ConfigError(f"vehicle URL {url!r}: port must be in 1..65535 (MAVSDK refuses 0)")
-    return url
-
-
-_LOG_LEVELS: Final = {
-    LogLevel.DEBUG: logging.DEBUG,
-    LogLevel.INFO: logging.INFO,
-    LogLevel.WARN: logging.WARNING,
-    LogLevel.ERROR: logging.ERROR,
-}
-_mavsdk_log = logging.getLogger("mavsdk")
-_log_route_lock = threading.Lock()
-_log_routed = False
-
-
-class RepeatLimiter:
-    """Lets each distinct message through at most once per ``window_s`` seconds and says how
-    many of it were held back since it last went through. Thread-safe (libmavsdk logs from its
-    own threads)."""
-
-    def __init__(self, window_s: float, clock: Callable[[], float] = time.monotonic) -> None:
-        if not (math.isfinite(window_s) and window_s >= 0.0):
-            raise ValueError(f"window_s must be finite and >= 0, got {window_s!r}")
-        self._window_s = window_s
-        self._clock = clock
-        self._lock = threading.Lock()
-        self._last: dict[str, tuple[float, int]] = {}  # message -> (time let through, held back)
-
-    def admit(self, message: str) -> int | None:
-        """None: hold this one back; else let it through, after that many were held back."""
-        now = self._clock()
-        with self._lock:
-            last = self._last.get(message)
-            if last is not None and now - last[0] < self._window_s:
-                self._last[message] = (last[0], last[1] + 1)
-                return None
-            if len(self._last) > 1000:  # messages with changing text: forget the oldest
-                self._last.clear()
-            self._last[message] = (now, 0)
-            return 0 if last is None else last[1]
-
-
-#: how often the same libmavsdk log line may appear (a cut link logs "Sending message failed"
-#: at the setpoint rate)
-MAVSDK_LOG_REPEAT_S: Final = 5.0
-
-
-def route_mavsdk_logs() -> None:
-    """Send libmavsdk's own log lines to the ``mavsdk`` Python logger instead of stdout, each
-    distinct line at most once per ``MAVSDK_LOG_REPEAT_S`` with a count of the repeats held
-    back.
-
-    Process-wide (libmavsdk has one log callback); idempotent.
-    """
-    global _log_routed
-    with _log_route_lock:
-        if _log_routed:
-            return
-        limiter = RepeatLimiter(MAVSDK_LOG_REPEAT_S)
-
-        def handler(level: LogLevel, message: str, file: str | None, line: int) -> bool:
-            held = limiter.admit(message)
-            if held is None:
-                return True
-            more = f" (and {held} times more since it was last logged)" if held else ""
-            _mavsdk_log.log(
-                _LOG_LEVELS.get(level, logging.INFO), "%s (%s:%d)%s", message, file, line, more
-            )
-            return True
-
-        log_subscribe(handler)
-        _log_routed = True
-
-
-_END: Final = object()
-
-
-class Subscription(Generic[T]):
-    """One subscriber's view of a broadcast: registered when created (nothing published after
-    the call is missed), read with ``async for``, released by ``aclose()`` or at the end."""
-
-    def __init__(self, queues: set[asyncio.Queue[object]], queue_size: int, closed: bool) -> None:
-        self._queues = queues
-        self._queue: asyncio.Queue[object] = asyncio.Queue(queue_size)
-        self._done = closed
-        if not closed:
-            queues.add(self._queue)
-
-    def __aiter__(self) -> Subscription[T]:
-        return self
-
-    async def __anext__(self) -> T:
-        if self._done:
-            raise StopAsyncIteration
-        item = await self._queue.get()
-        if item is _END:
-            await self.aclose()
-            raise StopAsyncIteration
-        return item  # type: ignore[return-value]
-
-    async def aclose(self) -> None:
-        self._done = True
-        self._queues.discard(self._queue)
-
-
-class _Broadcast(Generic[T]):
-    """Fan-out of one stream to many subscribers; a lagging one loses its oldest items."""
-
-    def __init__(self, name: str, queue_size: int) -> None:
-        self._name = name
-        self._queue_size = queue_size
-        self._queues: set[asyncio.Queue[object]] = set()
-        self._closed = False
-        self.dropped = 0
-
-    def publish(self, item: T) -> None:
-        for queue in self._queues:
-            if queue.full():
-                queue.get_nowait()
-                self.dropped += 1
-                if self.dropped == 1 or self.dropped % 100 == 0:
-                    log.warning("%s: a slow subscriber lost %d items", self._name, self.dropped)
-            queue.put_nowait(item)
-
-    def close(self) -> None:
-        self._closed = True
-        for queue in self._queues:
-            if queue.full():
-                queue.get_nowait()
-            queue.put_nowait(_END)
-
-    def subscribe(self) -> Subscription[T]:
-        return Subscription(self._queues, self._queue_size, self._closed)
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,8 +82,8 @@ class LinkConfig:
     mode_confirm_timeout_s: float = 3.0
     hold_timeout_s: float = 3.0
     clock_reset_s: float = 5.0
-    camera_component_id: int | None = MAV_COMP_ID_CAMERA
-    autopilot_component_id: int = MAV_COMP_ID_AUTOPILOT1
+    camera_component_id: int | None = mavlink.MAV_COMP_ID_CAMERA
+    autopilot_component_id: int = mavlink.MAV_COMP_ID_AUTOPILOT1
     px4_offboard_loss_action: int | None = 5
     arduplane_gcs_failsafe: bool = True
     arduplane_airspeed_check: bool = True
@@ -294,17 +116,10 @@ class LinkCounters:
     limited_by: dict[str, int] = field(default_factory=dict)
 
 
-def _fields(message: Any) -> dict[str, Any]:
-    loaded = json.loads(message.fields_json)
-    if not isinstance(loaded, dict):
-        raise ValueError(f"fields are not an object: {message.fields_json!r}")
-    return loaded
-
-
 class MavsdkVehicleLink:
     """One vehicle over MAVSDK; an async context manager that runs its readers in a TaskGroup.
 
-    Built by ``MavsdkHub.link``; see ``app.adapters.vehicle.link.VehicleLink`` for the contract.
+    Built by ``MavsdkHub.link``; see ``app.runtime.ports.vehicle.VehicleLink`` for the contract.
     """
 
     def __init__(
@@ -323,13 +138,13 @@ class MavsdkVehicleLink:
         self._config = config
         self._clock = clock
         self.counters = LinkCounters()
-        self._telemetry: _Broadcast[VehicleTelemetry] = _Broadcast(
+        self._telemetry: Broadcast[VehicleTelemetry] = Broadcast(
             f"vehicle {system_id} telemetry", config.queue_size
         )
-        self._observations: _Broadcast[TargetObservation] = _Broadcast(
+        self._observations: Broadcast[TargetObservation] = Broadcast(
             f"vehicle {system_id} observations", config.queue_size
         )
-        self._events: _Broadcast[LinkEvent] = _Broadcast(
+        self._events: Broadcast[LinkEvent] = Broadcast(
             f"vehicle {system_id} events", config.queue_size
         )
         self._latest: VehicleTelemetry | None = None
@@ -510,14 +325,12 @@ class MavsdkVehicleLink:
                 if message.component_id != self._config.autopilot_component_id:
                     continue
                 try:
-                    fields = _fields(message)
-                    custom_mode = int(fields["custom_mode"])
-                    base_mode = int(fields["base_mode"])
+                    custom_mode, armed = telemetry.heartbeat_modes(telemetry.fields(message))
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed("HEARTBEAT", exc)
                     continue
                 self._mode = adapter.mode_name(custom_mode)
-                self._armed = bool(base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+                self._armed = armed
                 if self._offboard == "active" and self._mode != adapter.control_mode:
                     self._offboard = "left"
                     self.counters.left_offboard += 1
@@ -537,7 +350,7 @@ class MavsdkVehicleLink:
                 if message.component_id != self._config.autopilot_component_id:
                     continue
                 try:
-                    frame = self._frame(_fields(message))
+                    frame = self._frame(telemetry.fields(message))
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed("GLOBAL_POSITION_INT", exc)
                     continue
@@ -555,7 +368,9 @@ class MavsdkVehicleLink:
                 await self._notify()
 
     def _frame(self, f: dict[str, Any]) -> VehicleTelemetry | None:
-        t_s = int(f["time_boot_ms"]) / 1000.0
+        """A GLOBAL_POSITION_INT as the next frame; None for a late or repeated one (counted).
+        Time going back by ``clock_reset_s`` or more is a reboot: an event, and a new start."""
+        t_s = telemetry.time_boot_s(f)
         previous = self._latest
         if previous is not None and t_s <= previous.t_s:
             if previous.t_s - t_s < self._config.clock_reset_s:
@@ -564,39 +379,14 @@ class MavsdkVehicleLink:
             log.warning("vehicle %d: clock reset %.2f -> %.2f s", self._id, previous.t_s, t_s)
             self._events.publish(VehicleClockReset(self._id, t_s, previous.t_s))
             self._previous = None
-        lat = int(f["lat"]) / 1e7
-        lon = int(f["lon"]) / 1e7
-        alt = int(f["alt"]) / 1000.0
-        v_north = int(f["vx"]) / 100.0
-        v_east = int(f["vy"]) / 100.0
-        v_down = int(f["vz"]) / 100.0
-        speed = math.hypot(v_north, v_east)
-        hdg = int(f["hdg"])
-        if speed < 0.5 and hdg != UINT16_MAX:
-            course = math.radians(hdg / 100.0)
-        else:
-            course = course_from_velocity(v_east, v_north)
-        relative_altitude = int(f["relative_alt"]) / 1000.0
-        east, north, up = self._origin.to_enu(lat, lon, alt)
-        return VehicleTelemetry(
-            vehicle_id=self._id,
-            t_s=t_s,
-            latitude_deg=lat,
-            longitude_deg=lon,
-            altitude_m=alt,
-            relative_altitude_m=relative_altitude,
-            east_m=east,
-            north_m=north,
-            up_m=up,
-            course_rad=course,
-            ground_speed_m_s=speed,
-            v_east_m_s=v_east,
-            v_north_m_s=v_north,
-            climb_rate_m_s=-v_down,
+        return telemetry.global_position(
+            f,
+            self._id,
+            self._origin,
             flight_mode=self._mode,
             armed=self._armed,
-            in_air=self._in_air or relative_altitude > self._config.airborne_altitude_m,
-            link_ok=True,
+            landed_state_in_air=self._in_air,
+            airborne_altitude_m=self._config.airborne_altitude_m,
         )
 
     async def _read_local_position(self) -> None:
@@ -605,8 +395,7 @@ class MavsdkVehicleLink:
                 if message.component_id != self._config.autopilot_component_id:
                     continue
                 try:
-                    f = _fields(message)
-                    self._local_ned = (float(f["x"]), float(f["y"]), float(f["z"]))
+                    self._local_ned = telemetry.local_position_ned(telemetry.fields(message))
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed("LOCAL_POSITION_NED", exc)
 
@@ -630,7 +419,7 @@ class MavsdkVehicleLink:
                 if wanted is not None and message.component_id != wanted:
                     continue
                 try:
-                    observation = self._observation(_fields(message))
+                    observation = self._observation(telemetry.fields(message))
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed(name, exc)
                     continue
@@ -641,35 +430,9 @@ class MavsdkVehicleLink:
                 self._observations.publish(observation)
 
     def _observation(self, f: dict[str, Any]) -> TargetObservation | None:
-        status = int(f["tracking_status"])
         latest = self._latest
-        if (
-            not status & CAMERA_TRACKING_STATUS_FLAGS_ACTIVE
-            or status & CAMERA_TRACKING_STATUS_FLAGS_ERROR
-            or latest is None
-        ):
-            return None
-        lat = int(f["lat"]) / 1e7
-        lon = int(f["lon"]) / 1e7
-        raw_alt = f.get("alt")
-        alt = float(raw_alt) if raw_alt is not None else self._origin.altitude_m
-        if not math.isfinite(alt):
-            alt = self._origin.altitude_m
-        h_acc = f.get("h_acc")
-        sigma = float(h_acc) if h_acc is not None else None
-        if sigma is not None and not (math.isfinite(sigma) and sigma > 0.0):
-            sigma = None
-        east, north, _ = self._origin.to_enu(lat, lon, alt)
-        return TargetObservation(
-            vehicle_id=self._id,
-            t_s=latest.t_s,
-            latitude_deg=lat,
-            longitude_deg=lon,
-            altitude_m=alt,
-            east_m=east,
-            north_m=north,
-            sigma_m=sigma,
-        )
+        t_s = None if latest is None else latest.t_s
+        return telemetry.tracking_observation(f, self._id, self._origin, t_s)
 
     async def _watchdog(self) -> None:
         period = self._config.link_timeout_s / 4.0
@@ -839,138 +602,3 @@ class MavsdkVehicleLink:
             except BaseException:
                 self._offboard = before
                 raise
-
-
-class MavsdkHub:
-    """One Mavsdk instance with one or many connections, handing out a link per system id.
-
-    ::
-
-        async with MavsdkHub(["udpin://0.0.0.0:14540", "udpin://0.0.0.0:14541"], origin) as hub:
-            async with hub.link(1, config) as v1, hub.link(2, config) as v2:
-                ...
-    """
-
-    def __init__(
-        self,
-        urls: Iterable[str],
-        origin: GeodeticOrigin,
-        *,
-        clock: Callable[[], float] = time.monotonic,
-        route_logs: bool = True,
-    ) -> None:
-        self._urls = [validate_url(url) for url in urls]
-        if not self._urls:
-            raise ConfigError("at least one vehicle connection URL is needed")
-        self._origin = origin
-        self._clock = clock
-        self._route_logs = route_logs
-        self._mavsdk: Mavsdk | None = None
-        self._gcs_system_id = MAVSDK_GCS_SYSTEM_ID
-        self._open_ids: set[int] = set()
-
-    async def __aenter__(self) -> MavsdkHub:
-        if self._route_logs:
-            route_mavsdk_logs()
-        configuration = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
-        self._gcs_system_id = configuration.system_id  # what ArduPlane's SYSID_MYGCS must be
-        mavsdk = Mavsdk(configuration)
-        try:
-            for url in self._urls:
-                await mavsdk.add_any_connection(url)
-        except MavsdkConnectionError as exc:
-            mavsdk.destroy()
-            raise LinkError(f"cannot open vehicle connection {url}: {exc}") from exc
-        except BaseException:
-            mavsdk.destroy()
-            raise
-        self._mavsdk = mavsdk
-        return self
-
-    async def __aexit__(self, *exc_info: object) -> None:
-        mavsdk, self._mavsdk = self._mavsdk, None
-        if mavsdk is not None:
-            mavsdk.destroy()
-
-    async def system(self, system_id: int, timeout_s: float) -> System:
-        """The autopilot system with this MAVLink system id, waited for up to ``timeout_s``."""
-        mavsdk = self._mavsdk
-        if mavsdk is None:
-            raise LinkError("hub not open (use it as 'async with')")
-        try:
-            async with asyncio.timeout(timeout_s):
-                while True:
-                    for system in await mavsdk.get_systems():
-                        if (
-                            await system.get_system_id() == system_id
-                            and await system.has_autopilot()
-                        ):
-                            return system
-                    await asyncio.sleep(0.1)
-        except TimeoutError as exc:
-            raise LinkError(
-                f"no autopilot with system id {system_id} on {', '.join(self._urls)} "
-                f"within {timeout_s} s"
-            ) from exc
-
-    async def system_ids(self) -> list[int]:
-        """The system ids of the autopilots seen so far."""
-        mavsdk = self._mavsdk
-        if mavsdk is None:
-            raise LinkError("hub not open (use it as 'async with')")
-        return sorted(
-            [await s.get_system_id() for s in await mavsdk.get_systems() if await s.has_autopilot()]
-        )
-
-    @asynccontextmanager
-    async def link(
-        self, system_id: int, config: LinkConfig, *, timeout_s: float = 10.0
-    ) -> AsyncIterator[MavsdkVehicleLink]:
-        """A link to one vehicle, open for the ``async with`` block (holds the vehicle on exit).
-
-        One link per system id at a time: MAVSDK 4.1 resets a plugin's cached values when
-        another instance of that plugin on the same system goes away.
-        """
-        if system_id in self._open_ids:
-            raise LinkError(f"vehicle {system_id} already has an open link on this hub")
-        system = await self.system(system_id, timeout_s)
-        self._open_ids.add(system_id)
-        try:
-            async with MavsdkVehicleLink(
-                system, system_id, self._origin, config, self._clock, self._gcs_system_id
-            ) as link:
-                yield link
-        finally:
-            self._open_ids.discard(system_id)
-
-
-@asynccontextmanager
-async def open_vehicle_links(
-    urls: Iterable[str],
-    origin: GeodeticOrigin,
-    configs: dict[int, LinkConfig],
-    *,
-    timeout_s: float = 10.0,
-    clock: Callable[[], float] = time.monotonic,
-) -> AsyncIterator[dict[int, MavsdkVehicleLink]]:
-    """Links to several vehicles (system id -> config) through one hub, all open at once."""
-    async with MavsdkHub(urls, origin, clock=clock) as hub, AsyncExitStack() as stack:
-        links: dict[int, MavsdkVehicleLink] = {}
-        for system_id, config in configs.items():
-            links[system_id] = await stack.enter_async_context(
-                hub.link(system_id, config, timeout_s=timeout_s)
-            )
-        yield links
-
-
-__all__ = [
-    "LinkConfig",
-    "LinkCounters",
-    "MavsdkHub",
-    "MavsdkVehicleLink",
-    "RepeatLimiter",
-    "Subscription",
-    "open_vehicle_links",
-    "route_mavsdk_logs",
-    "validate_url",
-]
