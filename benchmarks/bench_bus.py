@@ -15,7 +15,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from app.adapters.bus import InProcessBroker, VehicleStatus, open_bus, topics
+from app.adapters.bus import InProcessBroker, open_bus
+from app.runtime.ports import topics
+from app.runtime.ports.messages import VehicleStatus
 
 
 def _status(i: int) -> VehicleStatus:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator
 
-from app.adapters.vehicle.link import (
+from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
     LinkEvent,
     TargetObservation,

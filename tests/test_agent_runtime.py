@@ -12,15 +12,14 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from app.adapters.bus import InProcessBroker, InProcessBus, codec, topics
-from app.adapters.vehicle.link import (
-    TargetObservation,
-)
+from app.adapters.bus import InProcessBroker, InProcessBus, codec
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core.estimation.messages import GlobalEstimate
 from app.runtime.agent import VehicleAgent
+from app.runtime.ports import topics
+from app.runtime.ports.vehicle import TargetObservation
 from app.runtime.wire import global_to_bus
 from tests.fake_link import QueueLink
 

@@ -10,25 +10,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from app.adapters.bus import (
+from app.adapters.bus import MalformedMessage, UnsupportedVersion, decode, encode
+from app.runtime.ports import topics
+from app.runtime.ports.messages import (
+    MESSAGE_TYPES,
     Command,
     GlobalEstimate,
     LinkState,
     LocalEstimate,
-    MalformedMessage,
     Message,
     MissionState,
     TargetObservation,
-    Topic,
-    TopicError,
-    TopicFilter,
-    UnsupportedVersion,
     VehicleStatus,
-    decode,
-    encode,
-    topics,
 )
-from app.adapters.bus.messages import MESSAGE_TYPES
+from app.runtime.ports.topics import Topic, TopicError, TopicFilter
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 names = st.from_regex(r"[A-Za-z0-9_.:-]{1,20}", fullmatch=True)

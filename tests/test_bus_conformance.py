@@ -16,24 +16,25 @@ from app.adapters.bus import (
     Birth,
     Bus,
     BusClosed,
-    Command,
-    GlobalEstimate,
     InProcessBroker,
     InProcessBus,
+    Subscription,
+    Will,
+    encode,
+    open_bus,
+)
+from app.runtime.ports import topics
+from app.runtime.ports.messages import (
+    Command,
+    GlobalEstimate,
     LinkState,
     LocalEstimate,
     Message,
     MissionState,
-    Subscription,
     TargetObservation,
-    Topic,
-    TopicError,
     VehicleStatus,
-    Will,
-    encode,
-    open_bus,
-    topics,
 )
+from app.runtime.ports.topics import Topic, TopicError
 from tests.mosquitto import Mosquitto, mosquitto_fixture  # noqa: F401
 
 WAIT_S = 5.0

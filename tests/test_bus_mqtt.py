@@ -15,20 +15,11 @@ import aiomqtt
 import paho.mqtt.publish
 import pytest
 
-from app.adapters.bus import (
-    Backoff,
-    Birth,
-    BrokerUrl,
-    BusUrlError,
-    LinkState,
-    MqttBus,
-    Will,
-    codec,
-    open_bus,
-    topics,
-)
+from app.adapters.bus import Backoff, Birth, BrokerUrl, BusUrlError, MqttBus, Will, codec, open_bus
 from app.adapters.bus.mqtt import READ_BURST, CancelSafeClient
 from app.errors import BusError, ConfigError
+from app.runtime.ports import topics
+from app.runtime.ports.messages import LinkState
 from tests.mosquitto import Mosquitto, free_port, mosquitto_fixture  # noqa: F401
 from tests.test_bus_conformance import WAIT_S, observation, take
 
@@ -150,7 +141,9 @@ async def test_a_retained_birth_is_heard_after_a_broker_restart(mosquitto: Mosqu
 WILL_CLIENT = textwrap.dedent(
     """
     import asyncio, sys
-    from app.adapters.bus import LinkState, MqttBus, Will, topics
+    from app.adapters.bus import MqttBus, Will
+    from app.runtime.ports import topics
+    from app.runtime.ports.messages import LinkState
 
     async def main(url):
         will = Will(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5))

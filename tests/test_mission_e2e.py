@@ -30,18 +30,20 @@ from typing import Any
 import numpy as np
 import pytest
 import pytest_asyncio
+from app.core.ground import team_view
+from app.core.stage import Stage, spacing_errors
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from app.adapters.bus import InProcessBus, MissionState, encode, topics
+from app.adapters.bus import InProcessBus, encode
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.config.schema import WaypointTargetConfig
 from app.core.frames import TAU, wrap_pi
-from app.core.ground import team_view
-from app.core.stage import Stage, spacing_errors
 from app.runtime.mission import Hook, MissionContext, MissionResult, run_mission
+from app.runtime.ports import topics
+from app.runtime.ports.messages import MissionState
 from sitl.ports import find_free_udp_base_port
 from sitl.server import SimTruth, SimulatorServer
 

@@ -2,12 +2,12 @@
 
 import pytest
 
-from app.adapters.vehicle.link import CourseSpeedCommand, VehicleTelemetry
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.errors import LinkError
 from app.runtime.mission import prepare_vehicle
+from app.runtime.ports.vehicle import CourseSpeedCommand, VehicleTelemetry
 from tests.fake_link import frame
 
 

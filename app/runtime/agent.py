@@ -16,9 +16,16 @@ import logging
 import math
 from dataclasses import dataclass
 
-from app.adapters.bus import Bus, Subscription, topics
-from app.adapters.bus import messages as bus
-from app.adapters.vehicle.link import (
+from app.core import mission_agent as logic
+from app.core.agent import OwnTelemetry
+from app.core.estimation.backlog import merge_backlog
+from app.core.estimation.messages import Observation
+from app.errors import LinkError
+from app.runtime.ports import messages as bus
+from app.runtime.ports import topics
+from app.runtime.ports.bus import Bus, Subscription
+from app.runtime.ports.events import EventSink
+from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
     LeftOffboard,
     LinkLost,
@@ -28,12 +35,6 @@ from app.adapters.vehicle.link import (
     VehicleLink,
     VehicleTelemetry,
 )
-from app.core import mission_agent as logic
-from app.core.agent import OwnTelemetry
-from app.core.estimation.backlog import merge_backlog
-from app.core.estimation.messages import Observation
-from app.errors import LinkError
-from app.runtime.events import EventSink
 from app.runtime.wire import global_to_core, local_to_bus, observation_to_core
 
 log = logging.getLogger(__name__)

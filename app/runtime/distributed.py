@@ -27,28 +27,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from app.adapters.bus import (
-    Backoff,
-    Birth,
-    BrokerUrl,
-    Bus,
-    Command,
-    LinkState,
-    MqttBus,
-    Subscription,
-    Will,
-    open_bus,
-    topics,
-)
+from app.adapters.bus import Backoff, Birth, BrokerUrl, Bus, MqttBus, Subscription, Will, open_bus
 from app.adapters.eventlog import EventLog
 from app.adapters.live_view import MissionSnapshot
 from app.adapters.tlog import TlogWriter
-from app.adapters.vehicle.link import GeodeticOrigin, VehicleLink
-from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
+from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.config.plan import MissionPlan
 from app.errors import BusError, ConfigError, LinkError, StandoffError
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
-from app.runtime.events import EventSink, LoggingSink
+from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundRuntimeParams, GroundStation, Measurement
 from app.runtime.mission import (
     MissionResult,
@@ -57,6 +45,10 @@ from app.runtime.mission import (
     record_tlog,
     write_outputs,
 )
+from app.runtime.ports import topics
+from app.runtime.ports.events import EventSink
+from app.runtime.ports.messages import Command, LinkState
+from app.runtime.ports.vehicle import GeodeticOrigin, VehicleLink
 from app.runtime.sim_process import simulator_process
 
 log = logging.getLogger(__name__)

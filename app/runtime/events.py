@@ -1,13 +1,11 @@
-"""Where runtime loops report what happened: an event sink (the run's JSON-lines log, or none)."""
+"""The default event sink: every event to the ``standoff.events`` logger, then on (the port:
+``app.runtime.ports.events``)."""
 
 import logging
-from typing import Protocol
+
+from app.runtime.ports.events import EventSink
 
 log = logging.getLogger("standoff.events")
-
-
-class EventSink(Protocol):
-    def emit(self, kind: str, t_s: float, **fields: object) -> None: ...
 
 
 WARNING_KINDS = frozenset({"falling_behind"})

@@ -13,13 +13,14 @@ import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from app.adapters.bus import Bus, Subscription, topics
-from app.adapters.bus import messages as bus
 from app.adapters.live_view import MissionSnapshot, VehicleRow
 from app.core import ground as logic
 from app.core.estimation.models import MotionModel
 from app.report.summary import TeamSample, VehicleSample
-from app.runtime.events import EventSink
+from app.runtime.ports import messages as bus
+from app.runtime.ports import topics
+from app.runtime.ports.bus import Bus, Subscription
+from app.runtime.ports.events import EventSink
 from app.runtime.wire import global_to_bus, local_to_core
 from sitl.target import TargetPath
 

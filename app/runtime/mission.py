@@ -19,25 +19,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from app.adapters.bus import (
-    BrokerUrl,
-    Bus,
-    InProcessBroker,
-    LinkState,
-    Will,
-    open_bus,
-    topics,
-)
+from app.adapters.bus import BrokerUrl, Bus, InProcessBroker, Will, open_bus
 from app.adapters.eventlog import EventLog
 from app.adapters.tlog import TlogSample, TlogWriter
-from app.adapters.vehicle.link import CourseSpeedCommand, GeodeticOrigin, VehicleLink
-from app.adapters.vehicle.mavsdk_link import LinkConfig, MavsdkHub, validate_url
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
+from app.adapters.vehicle.mavsdk.link import LinkConfig
+from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.config.plan import MissionPlan, sim_config
 from app.errors import LinkError
 from app.report.summary import TeamSample, summarize
 from app.report.track import TrackRow, write_track_csv
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
-from app.runtime.events import EventSink, LoggingSink
+from app.runtime.events import LoggingSink
 from app.runtime.ground import (
     GroundRuntimeParams,
     GroundStation,
@@ -46,6 +39,10 @@ from app.runtime.ground import (
     SimulatedSensor,
     TickSource,
 )
+from app.runtime.ports import topics
+from app.runtime.ports.events import EventSink
+from app.runtime.ports.messages import LinkState
+from app.runtime.ports.vehicle import CourseSpeedCommand, GeodeticOrigin, VehicleLink
 from app.runtime.sim_process import simulator_process
 from sitl.ports import find_free_udp_base_port, udp_ports_free
 from sitl.server import SimulatorServer

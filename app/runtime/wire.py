@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from app.adapters.bus import messages as bus
 from app.core.estimation import messages as est
+from app.runtime.ports import messages as bus
 
 
 def _nested(a: Any) -> Any:

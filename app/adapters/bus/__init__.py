@@ -1,10 +1,10 @@
-"""The message bus: one publish/subscribe interface, in-process (default) or MQTT (docs/bus.md)."""
+"""The message bus: the bus port (``app.runtime.ports.bus``) in-process (default) or over MQTT
+(docs/bus.md)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from app.adapters.bus import topics
 from app.adapters.bus.base import (
     DEFAULT_QUEUE_SIZE,
     Birth,
@@ -16,18 +16,7 @@ from app.adapters.bus.base import (
 )
 from app.adapters.bus.codec import MalformedMessage, UnsupportedVersion, decode, encode
 from app.adapters.bus.inproc import InProcessBroker, InProcessBus
-from app.adapters.bus.messages import (
-    Command,
-    GlobalEstimate,
-    LinkState,
-    LocalEstimate,
-    Message,
-    MissionState,
-    TargetObservation,
-    VehicleStatus,
-)
 from app.adapters.bus.mqtt import Backoff, BrokerUrl, BusUrlError, MqttBus
-from app.adapters.bus.topics import Topic, TopicError, TopicFilter
 
 __all__ = [
     "DEFAULT_QUEUE_SIZE",
@@ -38,28 +27,16 @@ __all__ = [
     "BusClosed",
     "BusStats",
     "BusUrlError",
-    "Command",
-    "GlobalEstimate",
     "InProcessBroker",
     "InProcessBus",
-    "LinkState",
-    "LocalEstimate",
     "MalformedMessage",
-    "Message",
-    "MissionState",
     "MqttBus",
     "Subscription",
-    "TargetObservation",
-    "Topic",
-    "TopicError",
-    "TopicFilter",
     "UnsupportedVersion",
-    "VehicleStatus",
     "Will",
     "decode",
     "encode",
     "open_bus",
-    "topics",
 ]
 
 

@@ -24,9 +24,9 @@ from types import TracebackType
 from typing import Self
 
 from app.adapters.bus import codec
-from app.adapters.bus.messages import Message
-from app.adapters.bus.topics import Topic, TopicFilter, as_filter, as_topic
 from app.errors import BusError
+from app.runtime.ports.messages import Message
+from app.runtime.ports.topics import Topic, TopicFilter, as_filter, as_topic
 
 log = logging.getLogger(__name__)
 

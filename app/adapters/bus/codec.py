@@ -6,8 +6,8 @@ import json
 
 from pydantic import TypeAdapter, ValidationError
 
-from app.adapters.bus.messages import SCHEMA_VERSION, AnyMessage, Message
 from app.errors import InputError
+from app.runtime.ports.messages import SCHEMA_VERSION, AnyMessage, Message
 
 _ADAPTER: TypeAdapter[AnyMessage] = TypeAdapter(AnyMessage)
 MAX_PAYLOAD_BYTES = 256 * 1024

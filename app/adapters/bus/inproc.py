@@ -14,7 +14,7 @@ import logging
 
 from app.adapters.bus import codec
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, Will
-from app.adapters.bus.topics import Topic, TopicFilter
+from app.runtime.ports.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)

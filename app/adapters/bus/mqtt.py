@@ -32,8 +32,8 @@ from paho.mqtt.properties import Properties
 
 from app.adapters.bus import codec
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, BusClosed, Will
-from app.adapters.bus.topics import Topic, TopicFilter
 from app.errors import BusError, ConfigError
+from app.runtime.ports.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
 
