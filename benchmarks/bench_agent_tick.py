@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_agent_tick [CONFIG] [--duration S] [--seed N]
 
 A vehicle agent's work per telemetry frame, with the pure functions of
-``app.core.mission_agent`` that the live agent loop calls: its camera's observation into the
+``app.core.mission.agent`` that the live agent loop calls: its camera's observation into the
 local IMM-UKF (``observe``) and the command (``control``: the target predicted to the frame's
 time, guidance with the optimal c, the inverse field and the moving-target correction, phase
 keeping on the active team). A fused estimate, when the ground published one since the last
@@ -13,8 +13,8 @@ heard it; the timing covers it too.
 The sequence is realistic and deterministic: ``configs/hil.toml``'s plan (three vehicles on
 the eq. 2 fixed-wing from their standby loiter, the target's A-B-C-D path, seeded sigma^2 =
 10 m^2 observations at 10 Hz per vehicle, the ground's fusion and stages from
-``app.core.ground``, telemetry at 10 Hz). Only the agents' ticks are timed; the ground and the
-vehicle model run outside the timer. Prints the median, p90, p99 and max per tick in ms,
+``app.core.mission.ground``, telemetry at 10 Hz). Only the agents' ticks are timed; the ground
+and the vehicle model run outside the timer. Prints the median, p90, p99 and max per tick in ms,
 per stage too (target: median <= 2 ms).
 """
 
@@ -30,8 +30,7 @@ from app.config.mission import MissionConfig
 from app.config.plan import build_plan, sim_config
 from app.core.agent import OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate, Observation
-from app.core.ground import GroundState, VehicleReport, hear_local, hear_status, tick
-from app.core.mission_agent import (
+from app.core.mission.agent import (
     MissionAgentState,
     TeammateFix,
     control,
@@ -41,6 +40,7 @@ from app.core.mission_agent import (
     initial_agent_state,
     observe,
 )
+from app.core.mission.ground import GroundState, VehicleReport, hear_local, hear_status, tick
 from sitl.fixedwing import step
 
 TICK_S = 0.1  # telemetry (and control) rate of the built-in simulator: 10 Hz

@@ -48,7 +48,7 @@ from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import MissionPlan, build_plan
 from app.core.frames import paper_angle_from_course
-from app.report.summary import TeamSample, VehicleSample
+from app.core.mission.team import TeamSample, VehicleSample
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 Array = NDArray[np.float64]

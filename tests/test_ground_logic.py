@@ -6,7 +6,7 @@ import pytest
 
 from app.core.estimation.federated import MainParams
 from app.core.estimation.messages import LocalEstimate
-from app.core.ground import (
+from app.core.mission.ground import (
     GroundParams,
     GroundState,
     VehicleReport,
@@ -14,7 +14,7 @@ from app.core.ground import (
     hear_status,
     tick,
 )
-from app.core.stage import Stage
+from app.core.mission.stage import Stage
 
 PARAMS = GroundParams(
     vehicles=(0, 1, 2), radius_m=90.0, tracking_command_t_s=10.0, main=MainParams(feedback="none")

@@ -1,41 +1,26 @@
-"""What the ground station records each tick (``GroundStation`` samples), without I/O."""
+"""What the ground station records each tick (its ``TeamSample``s), without I/O."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from app.adapters.bus import InProcessBroker, open_bus
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core.estimation.messages import GlobalEstimate
-from app.core.ground import VehicleReport
-from app.runtime.ground import GroundRuntimeParams, GroundStation
-
-
-class Events:
-    def emit(self, kind: str, t_s: float, **fields: object) -> None:
-        pass
+from app.core.mission.ground import VehicleReport, initial_ground_state, team_sample
 
 
 @pytest.mark.parametrize("with_truth", [True, False])
-async def test_a_sample_scores_the_estimate_only_against_a_truth(with_truth: bool) -> None:
+def test_a_sample_scores_the_estimate_only_against_a_truth(with_truth: bool) -> None:
     plan = build_plan(load_config("test-short", MissionConfig))
-    async with open_bus(None, client_id="ground", broker=InProcessBroker()) as bus:
-        station = GroundStation(
-            plan.ground,
-            GroundRuntimeParams(end_t_s=plan.end_t_s),
-            bus,
-            Events(),
-            truth=plan.target if with_truth else None,
-        )
-        fused = GlobalEstimate(
-            10.0, np.array([5.0, 0.0, -3.0, 0.0, 0.0, 0.0]), np.eye(6), (("0", 1.0),)
-        )
-        report = VehicleReport(10.0, 90.0, 0.0, 0.0, 14.0)
-        station.state = replace(station.state, fused=fused, reports=((0, report),), active=(0,))
-        sample = station._sample(10.0)
+    fused = GlobalEstimate(
+        10.0, np.array([5.0, 0.0, -3.0, 0.0, 0.0, 0.0]), np.eye(6), (("0", 1.0),)
+    )
+    report = VehicleReport(10.0, 90.0, 0.0, 0.0, 14.0)
+    state = replace(initial_ground_state(), fused=fused, reports=((0, report),), active=(0,))
+    sample = team_sample(state, 10.0, plan.ground, plan.target if with_truth else None)
     assert sample is not None
     if with_truth:
         truth = plan.target.state_at(10.0)

@@ -11,7 +11,7 @@ from app.core.estimation.federated import MainParams
 from app.core.estimation.imm import default_imm_params
 from app.core.estimation.local import LocalParams
 from app.core.estimation.messages import GlobalEstimate, Observation
-from app.core.mission_agent import (
+from app.core.mission.agent import (
     MissionAgentParams,
     MissionAgentState,
     TeammateFix,
@@ -23,7 +23,7 @@ from app.core.mission_agent import (
     observe,
     target_at,
 )
-from app.core.stage import spacing_errors
+from app.core.mission.stage import spacing_errors
 from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 
 ENVELOPE = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)

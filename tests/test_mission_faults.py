@@ -12,7 +12,7 @@ import pytest
 
 from app.core.estimation.federated import MainParams
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
-from app.core.ground import (
+from app.core.mission.ground import (
     GroundParams,
     GroundState,
     VehicleReport,

@@ -2,8 +2,8 @@ import math
 
 import matplotlib.image as mpimg
 
+from app.core.mission.team import TeamSample, VehicleSample
 from app.report.mission_plots import plot_mission
-from app.report.summary import TeamSample, VehicleSample
 
 
 def sample(t, stage, segment):

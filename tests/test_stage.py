@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.core.stage import (
+from app.core.mission.stage import (
     Stage,
     StageParams,
     StageState,

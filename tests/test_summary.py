@@ -2,7 +2,8 @@ import math
 
 import pytest
 
-from app.report.summary import TeamSample, VehicleSample, summarize
+from app.core.mission.team import TeamSample, VehicleSample
+from app.report.summary import summarize
 
 
 def ring(t, radius, offsets_deg, errors_m, stage, segment="wait", active=(True, True, True)):

@@ -13,9 +13,9 @@ from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams
-from app.core.ground import GroundParams
-from app.core.mission_agent import MissionAgentParams
-from app.core.stage import StageParams
+from app.core.mission.agent import MissionAgentParams
+from app.core.mission.ground import GroundParams
+from app.core.mission.stage import StageParams
 from app.errors import ConfigError
 from sitl.config import SimConfig, VehicleConfig
 from sitl.fixedwing import FixedWingState
@@ -103,6 +103,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 moving_speed_m_s=s.moving_speed_m_s,
             ),
             lost_after_s=max(2.0, 3.0 / config.sim.telemetry_rate_hz),
+            prediction_model=agents[0].prediction_model,
         )
         # The agent's command already keeps the implied course rate k (command - course) within
         # the limit (agent_step); the link's own course-change limiter would clip the lag

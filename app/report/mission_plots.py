@@ -12,7 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.patches import Circle
 
-from app.report.summary import TeamSample, phase_key
+from app.core.mission.team import TeamSample
+from app.report.summary import phase_key
 
 PART_TITLES = {"gather": "gather", "adjust": "adjust phase"}
 

@@ -7,65 +7,11 @@ include estimation error, as a user watching the vehicles would see it.
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from app.core.frames import TAU
-
-
-@dataclass(frozen=True, slots=True)
-class VehicleSample:
-    vehicle: int
-    active: bool
-    east_m: float
-    north_m: float
-    speed_m_s: float
-    course_rad: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class TeamSample:
-    """The team and the target at one instant of vehicle time."""
-
-    t_s: float
-    stage: str
-    target_segment: str
-    target_east_m: float
-    target_north_m: float
-    target_v_east_m_s: float
-    target_v_north_m_s: float
-    estimate: tuple[float, float, float, float] | None  # east, north, v_east, v_north
-    vehicles: tuple[VehicleSample, ...]
-
-    def distance_errors(self, radius_m: float) -> dict[int, float]:
-        """r - r_d about the true target for each active vehicle."""
-        return {
-            v.vehicle: math.hypot(v.east_m - self.target_east_m, v.north_m - self.target_north_m)
-            - radius_m
-            for v in self.vehicles
-            if v.active
-        }
-
-    def spacing_errors(self) -> dict[int, float]:
-        """For each active vehicle, the counter-clockwise gap to its neighbour minus 2 pi / n."""
-        active = [v for v in self.vehicles if v.active]
-        if len(active) < 2:
-            return {}
-        angles = sorted(
-            (
-                math.atan2(v.north_m - self.target_north_m, v.east_m - self.target_east_m) % TAU,
-                v.vehicle,
-            )
-            for v in active
-        )
-        desired = TAU / len(active)
-        errors = {}
-        for i, (angle, vehicle) in enumerate(angles):
-            nxt = angles[(i + 1) % len(angles)][0]
-            errors[vehicle] = (nxt - angle) % TAU - desired
-        return errors
+from app.core.mission.team import TeamSample
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:

@@ -1,7 +1,9 @@
-"""One vehicle's agent loop: the vehicle link and the bus around the pure mission logic.
+"""One vehicle's agent loop: a thin pump between the vehicle link, the bus and the core's
+``app.core.mission.agent.step``.
 
-Every telemetry frame from the vehicle is one control tick (``mission_agent.control``) whose
-command goes straight back to the vehicle; the camera's observations feed the local filter and
+Every telemetry frame from the vehicle is one control tick (``Control``) whose command goes
+straight back to the vehicle, then ``Telemetry`` (the status, when due, to the bus); the
+camera's observations feed the local filter (``Observed``, the local estimate out when due) and
 are published for the ground station; the fused estimate, the mission state and the teammates'
 statuses arrive from the bus. Nothing here blocks the control path: a refused command is logged
 and counted, a vehicle that left offboard is put back under control at most every
@@ -16,10 +18,10 @@ import logging
 import math
 from dataclasses import dataclass
 
-from app.core import mission_agent as logic
 from app.core.agent import OwnTelemetry
 from app.core.estimation.backlog import merge_backlog
 from app.core.estimation.messages import Observation
+from app.core.mission import agent as logic
 from app.errors import LinkError
 from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
@@ -102,21 +104,21 @@ class VehicleAgent:
     ) -> None:
         self.params = params
         self.name = f"agent-{params.vehicle}"
-        self.state = logic.initial_agent_state(params)
+        self.state = logic.initial_agent_state(
+            params, runtime.estimate_period_s, runtime.status_period_s
+        )
         self.counters = AgentCounters()
         self._link = link
         self._bus = bus_client
         self._events = events
         self._runtime = runtime
-        self._next_status_t = -math.inf
-        self._next_estimate_t = -math.inf
         self._next_offboard_retry_t = -math.inf
         self._last_t = 0.0
         self._load = _LoadWindow()
 
     def stand_down(self) -> None:
         """Stop commanding the vehicle (the mission is about to put it in hold)."""
-        self.state = logic.set_holding(self.state, True)
+        self.state, _ = logic.step(self.state, logic.Hold(True), self.params)
 
     async def run(self) -> None:
         v = self.params.vehicle
@@ -159,27 +161,27 @@ class VehicleAgent:
             )
             self._frame_wait(frame)
             try:
-                self.state, command, agent_events = logic.control(self.state, t, own, self.params)
+                self.state, out = logic.step(self.state, logic.Control(t, own), self.params)
             except ValueError as exc:  # a non-finite frame: never steer on it
                 self._events.emit(
                     "telemetry_rejected", t, vehicle=self.params.vehicle, reason=str(exc)
                 )
                 continue
             self.counters.ticks += 1
-            for event in agent_events:
+            for event in out.events:
                 self._events.emit(
                     event.kind, event.t_s, vehicle=self.params.vehicle, detail=event.detail
                 )
-            if not self.state.holding:
+            if out.command is not None:
                 await self._send(
                     t,
                     CourseSpeedCommand(
-                        command.course_rad, command.speed_m_s, self._runtime.altitude_m
+                        out.command.course_rad, out.command.speed_m_s, self._runtime.altitude_m
                     ),
                 )
-            if t >= self._next_status_t:
-                self._next_status_t = t + self._runtime.status_period_s
-                await self._publish_status(t, own)
+            self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
+            if out.status is not None:
+                await self._publish_status(out.status)
 
     def _frame_wait(self, frame: VehicleTelemetry) -> None:
         """Count how long (vehicle seconds) the frame steered on waited after it arrived, when
@@ -243,29 +245,23 @@ class VehicleAgent:
             self.counters.commands_refused += 1
             self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
 
-    async def _publish_status(self, t: float, own: OwnTelemetry) -> None:
-        target = logic.target_at(self.state, t, self.params)
-        phase = (
-            0.0
-            if target is None
-            else math.atan2(own.north_m - target.north_m, own.east_m - target.east_m)
-        )
+    async def _publish_status(self, status: logic.AgentStatus) -> None:
         latest = self._link.latest
-        status = bus.VehicleStatus(
+        message = bus.VehicleStatus(
             sender=self.name,
-            t_s=t,
+            t_s=status.t_s,
             vehicle=self.params.vehicle,
-            east_m=own.east_m,
-            north_m=own.north_m,
+            east_m=status.east_m,
+            north_m=status.north_m,
             alt_m=latest.relative_altitude_m if latest is not None else 0.0,
-            course_rad=own.course_rad,
-            speed_m_s=max(own.speed_m_s, 0.0),
-            phase_rad=phase,
-            stage=self.state.stage,
+            course_rad=status.course_rad,
+            speed_m_s=status.speed_m_s,
+            phase_rad=status.phase_rad,
+            stage=status.stage.value,
             link="ok" if self._link.link_ok else "lost",
-            healthy=not self.state.holding,
+            healthy=status.healthy,
         )
-        await self._bus.publish(topics.status(self.params.vehicle), status)
+        await self._bus.publish(topics.status(self.params.vehicle), message)
 
     # --- what the agent hears ---------------------------------------------------------------
 
@@ -322,8 +318,9 @@ class VehicleAgent:
         await self._bus.publish(topics.observation(self.params.vehicle), message)
 
     async def _use_observation(self, obs: Observation) -> None:
-        self.state, report = logic.observe(self.state, obs, self.params)
-        if not report.used:
+        self.state, out = logic.step(self.state, logic.Observed(obs), self.params)
+        report = out.report
+        if report is not None and not report.used:
             self.counters.observations_dropped += 1
             self._events.emit(
                 "observation_dropped",
@@ -334,14 +331,11 @@ class VehicleAgent:
             )
             return
         self.counters.observations_used += 1
-        if obs.t_s >= self._next_estimate_t:
-            estimate = self.state.local.estimate()
-            if estimate is not None:
-                self._next_estimate_t = obs.t_s + self._runtime.estimate_period_s
-                await self._bus.publish(
-                    topics.local_estimate(self.params.vehicle),
-                    local_to_bus(estimate, self.params.vehicle, self.name),
-                )
+        if out.estimate is not None:
+            await self._bus.publish(
+                topics.local_estimate(self.params.vehicle),
+                local_to_bus(out.estimate, self.params.vehicle, self.name),
+            )
 
     async def _hear(self, subscription: Subscription) -> None:
         async for _topic, message in subscription:
@@ -349,16 +343,17 @@ class VehicleAgent:
                 case bus.TargetObservation() if message.sender != self.name:
                     await self._use_observation(observation_to_core(message, self.params.vehicle))
                 case bus.GlobalEstimate():
-                    self.state = logic.hear_fused(self.state, global_to_core(message), self.params)
+                    heard = logic.HeardFused(global_to_core(message))
+                    self.state, _ = logic.step(self.state, heard, self.params)
                 case bus.MissionState():
-                    before = self.state.stage
-                    self.state = logic.hear_mission(self.state, message.stage, message.active)
-                    if self.state.stage != before:
+                    mission = logic.HeardMission(message.stage, message.active)
+                    self.state, out = logic.step(self.state, mission, self.params)
+                    if out.stage is not None:
                         self._events.emit(
                             "agent_stage",
                             message.t_s,
                             vehicle=self.params.vehicle,
-                            stage=message.stage,
+                            stage=out.stage.value,
                         )
                 case bus.VehicleStatus() if message.vehicle != self.params.vehicle:
                     fix = logic.TeammateFix(
@@ -368,7 +363,8 @@ class VehicleAgent:
                         message.course_rad,
                         message.speed_m_s,
                     )
-                    self.state = logic.hear_teammate(self.state, message.vehicle, fix)
+                    teammate = logic.HeardTeammate(message.vehicle, fix)
+                    self.state, _ = logic.step(self.state, teammate, self.params)
                 case bus.Command() if (
                     message.vehicles is None or self.params.vehicle in message.vehicles
                 ):
@@ -381,10 +377,10 @@ class VehicleAgent:
         self._events.emit("command", t, vehicle=self.params.vehicle, command=message.command)
         try:
             if message.command in ("hold", "shutdown"):
-                self.state = logic.set_holding(self.state, True)
+                self.state, _ = logic.step(self.state, logic.Hold(True), self.params)
                 await self._link.hold()
             elif message.command == "resume" and self.state.holding:
-                self.state = logic.set_holding(self.state, False)
+                self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
                 latest = self._link.latest
                 course = latest.course_rad if latest is not None else 0.0
                 await self._link.start_offboard(

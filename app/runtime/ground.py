@@ -1,9 +1,10 @@
 """The ground station loop: the bus around the pure ground logic, plus observation sources.
 
-Mission time is the vehicles' own time (``app.core.ground``): each status that moves it past the
-next tick runs one tick: the active team, the fused estimate (published), the stage (published
-as ``MissionState``), the observation sources that are due, a recorded ``TeamSample`` and the
-live view. The loop ends once mission time reaches ``end_t_s``.
+A thin pump around the core's ``app.core.mission.ground.step``: statuses and local estimates from
+the bus go in; a status that moves mission time (the vehicles' own) past the next tick runs one
+tick, whose outbox comes out here: the fused estimate (published), the mission state (published
+as ``MissionState`` when due), the recorded ``TeamSample`` and the live view; then the
+observation sources that are due. The loop ends once mission time reaches ``end_t_s``.
 """
 
 import asyncio
@@ -13,14 +14,13 @@ import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from app.adapters.live_view import MissionSnapshot, VehicleRow
-from app.core import ground as logic
-from app.core.estimation.models import MotionModel
-from app.report.summary import TeamSample, VehicleSample
+from app.core.mission import ground as logic
+from app.core.mission.team import TeamSample
 from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus, Subscription
 from app.runtime.ports.events import EventSink
+from app.runtime.ports.view import MissionSnapshot, VehicleRow
 from app.runtime.wire import global_to_bus, local_to_core
 from sitl.target import TargetPath
 
@@ -116,7 +116,7 @@ class GroundStation:
     ) -> None:
         self.params = params
         self.runtime = runtime
-        self.state = logic.GroundState()
+        self.state = logic.initial_ground_state(runtime.tick_period_s, runtime.mission_period_s)
         self.samples: list[TeamSample] = []
         self.name = name
         self._bus = bus_client
@@ -125,10 +125,6 @@ class GroundStation:
         self._sources = list(sources)
         self._external = external_observations
         self._on_snapshot = on_snapshot
-        self._next_tick_t = -math.inf
-        self._next_mission_t = -math.inf
-        self._last_stage = ""
-        self._cv = MotionModel("cv", 0.05)
 
     async def run(self) -> None:
         try:
@@ -157,11 +153,13 @@ class GroundStation:
                         link_ok=message.link == "ok",
                         healthy=message.healthy,
                     )
-                    self.state = logic.hear_status(self.state, message.vehicle, report)
-                    if self.state.mission_t_s >= self._next_tick_t:
-                        await self._tick()
+                    heard = logic.HeardStatuses(((message.vehicle, report),))
+                    self.state, out = logic.step(self.state, heard, self.params, self._truth)
+                    if out.tick_t_s is not None:
+                        await self._carry(out.tick_t_s, out)
                 case bus.LocalEstimate():
-                    self.state = logic.hear_local(self.state, local_to_core(message))
+                    local = logic.HeardLocal(local_to_core(message))
+                    self.state, _ = logic.step(self.state, local, self.params)
                 case _:
                     pass
 
@@ -179,24 +177,21 @@ class GroundStation:
                             reason=f"unknown vehicle {message.vehicle}",
                         )
 
-    async def _tick(self) -> None:
-        t = self.state.mission_t_s
-        self._next_tick_t = t + self.runtime.tick_period_s
-        self.state, fused, events = logic.tick(self.state, self.params)
-        for event in events:
+    async def _carry(self, t: float, out: logic.GroundOutbox) -> None:
+        """Send and record what the station's tick at mission time ``t`` put in its outbox,
+        then the observation sources that are due."""
+        for event in out.events:
             self._events.emit(event.kind, event.t_s, detail=event.detail)
-        if fused is not None:
-            await self._bus.publish(topics.GLOBAL_ESTIMATE, global_to_bus(fused, self.name))
-        stage = self.state.stage.stage.value
-        if stage != self._last_stage or t >= self._next_mission_t:
-            self._last_stage = stage
-            self._next_mission_t = t + self.runtime.mission_period_s
+        if out.fused is not None:
+            await self._bus.publish(topics.GLOBAL_ESTIMATE, global_to_bus(out.fused, self.name))
+        if out.mission is not None:
+            m = out.mission
             mission = bus.MissionState(
                 sender=self.name,
-                t_s=t,
-                stage=stage,
-                active=self.state.active,
-                spacing_rad=logic.desired_spacing_rad(self.state),
+                t_s=m.t_s,
+                stage=m.stage.value,
+                active=m.active,
+                spacing_rad=m.spacing_rad,
             )
             await self._bus.publish(topics.MISSION, mission)
         for source in self._sources:
@@ -213,50 +208,12 @@ class GroundStation:
                         sigma_m=m.sigma_m,
                     ),
                 )
-        sample = self._sample(t)
-        if sample is not None:
-            self.samples.append(sample)
+        if out.sample is not None:
+            self.samples.append(out.sample)
             if self._on_snapshot is not None:
-                self._on_snapshot(self._snapshot(sample))
+                self._on_snapshot(self._snapshot(out.sample))
         if t >= self.runtime.end_t_s:
             raise MissionComplete
-
-    def _estimate_at(self, t: float) -> tuple[float, float, float, float] | None:
-        fused = self.state.fused
-        if fused is None:
-            return None
-        x = self._cv.transition(t - fused.t_s) @ fused.x
-        return float(x[0]), float(x[2]), float(x[1]), float(x[3])
-
-    def _sample(self, t: float) -> TeamSample | None:
-        estimate = self._estimate_at(t)
-        if self._truth is not None:
-            truth = self._truth.state_at(t)
-            segment = self._truth.segment_at(t)
-            target = (truth.east_m, truth.north_m, truth.v_east_m_s, truth.v_north_m_s)
-        elif estimate is not None:
-            # no truth: the orbit is scored about the estimate, which has nothing to be scored
-            # against itself (an estimation error here would read 0)
-            segment, target, estimate = "estimated", estimate, None
-        else:
-            return None
-        vehicles = []
-        active = set(self.state.active)
-        for v, r in self.state.reports:
-            dt = t - r.t_s
-            vehicles.append(
-                VehicleSample(
-                    v,
-                    v in active,
-                    r.east_m + r.speed_m_s * math.sin(r.course_rad) * dt,
-                    r.north_m + r.speed_m_s * math.cos(r.course_rad) * dt,
-                    r.speed_m_s,
-                    r.course_rad,
-                )
-            )
-        return TeamSample(
-            t, self.state.stage.stage.value, segment, *target, estimate, tuple(vehicles)
-        )
 
     def _snapshot(self, sample: TeamSample) -> MissionSnapshot:
         dist = sample.distance_errors(self.params.radius_m)

@@ -1,18 +1,19 @@
 """The live mission's logic in one deterministic loop: no MAVLink, no bus, no clock.
 
 ``run_mission_sim`` flies the team of a ``MissionPlan`` (``app.config.plan.build_plan``) on
-the eq. (2) fixed-wing of ``sitl.fixedwing`` around the plan's scripted target, and drives, in
-the order the live mission does, the same pure functions:
+the eq. (2) fixed-wing of ``sitl.fixedwing`` around the plan's scripted target, and pumps the
+core's mission state machine (``app.core.mission.agent.step``, ``app.core.mission.ground.step``)
+in the order the live mission does, carrying each outbox to where the bus would:
 
 - every camera period, each vehicle's seeded noisy camera (sigma^2 per axis, as the built-in
-  simulator's) -> ``mission_agent.observe`` (its local IMM-UKF);
-- every ``estimate_period_s`` each agent's local estimate -> ``ground.hear_local`` (through the
-  live mission's bus conversions, ``app.runtime.wire``, both ways);
-- every control period: each vehicle's status -> ``ground.hear_status``; ``ground.tick`` (active
-  team, fusion, stage); the fused estimate -> ``mission_agent.hear_fused``; the stage ->
-  ``hear_mission``; teammates' fixes -> ``hear_teammate``; then ``mission_agent.control`` -> the
-  (course, speed) command, applied to the vehicle after ``latency_ticks`` control periods
-  (0: at once, as the live loop nearly does; 1: one tick late) and held between ticks.
+  simulator's) -> ``Observed`` (its local IMM-UKF); the local estimate when due -> the ground's
+  ``HeardLocal`` (through the live mission's bus conversions, ``app.runtime.wire``, both ways);
+- every control period: each vehicle's ``Telemetry`` -> its status -> the ground's
+  ``HeardStatuses`` (one tick: active team, fusion, stage, the recorded sample); the fused
+  estimate and the mission state when due -> every agent; the statuses -> teammates' fixes;
+  then ``Control`` -> the (course, speed) command, applied to the vehicle after
+  ``latency_ticks`` control periods (0: at once, as the live loop nearly does; 1: one tick
+  late) and held between ticks.
 
 Figures come from ``app.report.summary.summarize`` on the same ``TeamSample``s the ground
 station records (errors against the true target), so they read like a live run's
@@ -28,11 +29,13 @@ from typing import Any
 import numpy as np
 
 from app.config.plan import MissionPlan, team_starts
-from app.core import ground as ground_logic
-from app.core import mission_agent as logic
 from app.core.agent import AgentParams, OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
-from app.report.summary import TeamSample, VehicleSample, summarize
+from app.core.frames import wrap_pi
+from app.core.mission import agent as logic
+from app.core.mission import ground as ground_logic
+from app.core.mission.team import TeamSample
+from app.report.summary import summarize
 from app.runtime import wire
 from sitl.fixedwing import FixedWingLimits, step
 
@@ -94,8 +97,18 @@ class MissionSimResult:
         return None if value is None else value["team"]
 
 
-def _wrap_pi(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+def _report(status: logic.AgentStatus) -> ground_logic.VehicleReport:
+    """What the ground station keeps of an agent's status."""
+    s = status
+    return ground_logic.VehicleReport(
+        s.t_s, s.east_m, s.north_m, s.course_rad, s.speed_m_s, healthy=s.healthy
+    )
+
+
+def _fix(status: logic.AgentStatus) -> logic.TeammateFix:
+    """What a teammate keeps of an agent's status."""
+    s = status
+    return logic.TeammateFix(s.t_s, s.east_m, s.north_m, s.course_rad, s.speed_m_s)
 
 
 def _bus_local(estimate: LocalEstimate, vehicle: int) -> LocalEstimate:
@@ -139,12 +152,11 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     rngs = [np.random.default_rng([setup.seed, i]) for i in range(n)]
 
     vehicles = team_starts(plan)
-    states = [logic.initial_agent_state(a) for a in agents]
-    gstate = ground_logic.GroundState()
+    # statuses and the ground's tick at every control tick; estimates and the mission state on
+    # the schedule the live mission keeps (both in the core's states)
+    states = [logic.initial_agent_state(a, setup.estimate_period_s, 0.0) for a in agents]
+    gstate = ground_logic.initial_ground_state(0.0, setup.mission_period_s)
     gparams = plan.ground
-    next_estimate_t = [-math.inf] * n
-    next_mission_t = -math.inf
-    last_stage = ""
     pending: deque[tuple[float, list[tuple[float, float]]]] = deque()
     held = [(v.course_rad, v.speed_m_s) for v in vehicles]
     samples: list[TeamSample] = []
@@ -155,71 +167,49 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     step_index = 0
     for tick in range(ticks + 1):
         t = tick * per_tick * dt
-        # 1. statuses -> ground; ground tick; fused estimate and mission state -> agents
-        for i, v in enumerate(vehicles):
-            report = ground_logic.VehicleReport(t, v.east_m, v.north_m, v.course_rad, v.speed_m_s)
-            gstate = ground_logic.hear_status(gstate, i, report)
-        gstate, fused, gevents = ground_logic.tick(gstate, gparams)
-        events.extend((e.t_s, e.kind, e.detail) for e in gevents)
-        if fused is not None:
-            wire = _bus_global(fused)
-            states = [logic.hear_fused(s, wire, a) for s, a in zip(states, agents, strict=True)]
-        stage = gstate.stage.stage.value
-        if stage != last_stage or t >= next_mission_t:
-            last_stage = stage
-            next_mission_t = t + setup.mission_period_s
-            states = [logic.hear_mission(s, stage, gstate.active) for s in states]
-        # 2. teammates' fixes
+        # 1. statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes
+        owns = [OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s) for v in vehicles]
+        statuses: list[tuple[int, logic.AgentStatus]] = []
+        for i, own in enumerate(owns):
+            states[i], out = logic.step(states[i], logic.Telemetry(t, own), agents[i])
+            if out.status is not None:
+                statuses.append((i, out.status))
+        heard = ground_logic.HeardStatuses(tuple((i, _report(s)) for i, s in statuses))
+        gstate, gout = ground_logic.step(gstate, heard, gparams, path)
+        events.extend((e.t_s, e.kind, e.detail) for e in gout.events)
+        if gout.sample is not None:
+            samples.append(gout.sample)
+        inputs: list[logic.AgentInput] = []
+        if gout.fused is not None:
+            inputs.append(logic.HeardFused(_bus_global(gout.fused)))
+        if gout.mission is not None:
+            inputs.append(logic.HeardMission(gout.mission.stage, gout.mission.active))
         for i in range(n):
-            for j, v in enumerate(vehicles):
-                if j != i:
-                    fix = logic.TeammateFix(t, v.east_m, v.north_m, v.course_rad, v.speed_m_s)
-                    states[i] = logic.hear_teammate(states[i], j, fix)
-        # 3. sample (before the commands of this tick act)
-        truth = path.state_at(t)
-        estimate = None
-        if gstate.fused is not None:
-            fx = gstate.fused
-            f = plan.agents[0].prediction_model.transition(t - fx.t_s) @ fx.x
-            estimate = (float(f[0]), float(f[2]), float(f[1]), float(f[3]))
-        samples.append(
-            TeamSample(
-                t,
-                stage,
-                path.segment_at(t),
-                truth.east_m,
-                truth.north_m,
-                truth.v_east_m_s,
-                truth.v_north_m_s,
-                estimate,
-                tuple(
-                    VehicleSample(
-                        i, i in gstate.active, v.east_m, v.north_m, v.speed_m_s, v.course_rad
-                    )
-                    for i, v in enumerate(vehicles)
-                ),
-            )
-        )
-        # 4. control
+            fixes = [logic.HeardTeammate(j, _fix(s)) for j, s in statuses if j != i]
+            for event in (*inputs, *fixes):
+                states[i], _ = logic.step(states[i], event, agents[i])
+        # 2. control
         if setup.truth_fed:
-            exact = _truth_estimate(t, truth)
+            exact = _truth_estimate(t, path.state_at(t))
             states = [replace(s, fused=exact) for s in states]
-        out = []
-        for i, v in enumerate(vehicles):
-            own = OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
-            states[i], command, aevents = logic.control(states[i], t, own, agents[i])
-            events.extend((e.t_s, e.kind, f"vehicle {i}: {e.detail}") for e in aevents)
-            out.append((command.course_rad, command.speed_m_s))
-        pending.append((t, out))
+        out_commands = []
+        for i, own in enumerate(owns):
+            states[i], out = logic.step(states[i], logic.Control(t, own), agents[i])
+            events.extend((e.t_s, e.kind, f"vehicle {i}: {e.detail}") for e in out.events)
+            command = out.command
+            out_commands.append(
+                held[i] if command is None else (command.course_rad, command.speed_m_s)
+            )
+        pending.append((t, out_commands))
         if len(pending) > setup.latency_ticks:
             sent_t, held = pending.popleft()
             for i, ((course, speed), v) in enumerate(zip(held, vehicles, strict=True)):
                 # the course rate it asks of the vehicle it now acts on
-                rate = k_gain * _wrap_pi(course - v.course_rad)
+                rate = k_gain * wrap_pi(course - v.course_rad)
                 commands.append((sent_t, i, course, speed, rate))
         if tick == ticks:
             break
-        # 5. fly to the next tick; cameras and local estimates on the way
+        # 3. fly to the next tick; cameras and local estimates on the way
         for _ in range(per_tick):
             vehicles = [step(v, c, s, limits, dt) for v, (c, s) in zip(vehicles, held, strict=True)]
             step_index += 1
@@ -236,12 +226,10 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
                     target.north_m + sigma * float(draws[1]),
                     sigma if sigma > 0.0 else None,
                 )
-                states[i], step_report = logic.observe(states[i], obs, agents[i])
-                if step_report.used and ts >= next_estimate_t[i]:
-                    local = states[i].local.estimate()
-                    if local is not None:
-                        next_estimate_t[i] = ts + setup.estimate_period_s
-                        gstate = ground_logic.hear_local(gstate, _bus_local(local, i))
+                states[i], out = logic.step(states[i], logic.Observed(obs), agents[i])
+                if out.estimate is not None:
+                    local = ground_logic.HeardLocal(_bus_local(out.estimate, i))
+                    gstate, _ = ground_logic.step(gstate, local, gparams)
     summary = summarize(
         samples,
         cfg.radius_m,

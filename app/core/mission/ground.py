@@ -8,10 +8,16 @@ when it reports healthy again. No wall clock is read, so the logic is the same a
 When the local estimates stop (no observations: every camera lost the target), the fused
 estimate coasts: it is predicted forward at constant velocity with a growing covariance, so the
 team keeps orbiting where the target should be.
+
+``step`` is the one entry for every driver: statuses and local estimates in, a ``GroundOutbox``
+out (the fused estimate, the ``MissionUpdate`` when due, the recorded ``TeamSample``, events).
+When the station ticks and when it announces the mission state ("on change or every period")
+is part of the state (``GroundState.ticks``, ``.announcements``).
 """
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 from app.core.estimation.federated import (
     MainParams,
@@ -24,7 +30,9 @@ from app.core.estimation.federated import (
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
 from app.core.estimation.models import MotionModel
 from app.core.frames import TAU
-from app.core.stage import Stage, StageParams, StageState, TeamView, next_stage
+from app.core.mission.schedule import Every
+from app.core.mission.stage import Stage, StageParams, StageState, TeamView, next_stage
+from app.core.mission.team import TeamSample, VehicleSample, dead_reckon
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,7 +60,8 @@ class GroundParams:
     ``coast_after_s``: once no local estimate has arrived for this long, the fused estimate is
     predicted with ``coast_model`` instead of fused (constant velocity: the acceleration last
     estimated is not extrapolated, which would take the predicted target off at ever higher
-    speed; the acceleration states are held)."""
+    speed; the acceleration states are held). ``prediction_model``: how the fused estimate is
+    predicted to a sample's time (the agents' own ``MissionAgentParams.prediction_model``)."""
 
     vehicles: tuple[int, ...]
     radius_m: float
@@ -64,6 +73,7 @@ class GroundParams:
     lost_after_s: float = 2.0
     coast_after_s: float = 1.0
     coast_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
+    prediction_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
 
     def __post_init__(self) -> None:
         if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
@@ -93,6 +103,9 @@ class GroundState:
     next_fuse_t_s: float = -math.inf
     next_feedback_t_s: float = -math.inf
     last_local_t_s: float = -math.inf  # time of the newest local estimate received
+    ticks: Every = field(default_factory=lambda: Every(0.1))
+    announcements: Every = field(default_factory=lambda: Every(0.5))
+    announced: Stage | None = None  # the stage last announced
 
     def report(self, vehicle: int) -> VehicleReport | None:
         return dict(self.reports).get(vehicle)
@@ -164,9 +177,7 @@ def team_view(state: GroundState, params: GroundParams) -> TeamView:
     dist, angles = [], []
     for v in state.active:
         r = reports[v]
-        dt = state.fused.t_s - r.t_s
-        e = r.east_m + r.speed_m_s * math.sin(r.course_rad) * dt
-        n = r.north_m + r.speed_m_s * math.cos(r.course_rad) * dt
+        e, n = dead_reckon(r.east_m, r.north_m, r.course_rad, r.speed_m_s, state.fused.t_s - r.t_s)
         dist.append(math.hypot(e - te, n - tn) - params.radius_m)
         angles.append(math.atan2(n - tn, e - te) % TAU)
     return TeamView(tuple(dist), tuple(angles), math.hypot(ve, vn))
@@ -220,16 +231,140 @@ def desired_spacing_rad(state: GroundState) -> float:
     return TAU / max(1, len(state.active))
 
 
-__all__ = [
-    "GroundEvent",
-    "GroundParams",
-    "GroundState",
-    "Stage",
-    "VehicleReport",
-    "coast",
-    "desired_spacing_rad",
-    "hear_local",
-    "hear_status",
-    "team_view",
-    "tick",
-]
+# --- the step every driver pumps ------------------------------------------------------------
+
+
+def initial_ground_state(tick_period_s: float = 0.1, mission_period_s: float = 0.5) -> GroundState:
+    """A fresh station that ticks at most every ``tick_period_s`` of mission time (0: on every
+    batch of statuses) and announces the mission state on a change of stage or every
+    ``mission_period_s``."""
+    return GroundState(ticks=Every(tick_period_s), announcements=Every(mission_period_s))
+
+
+class TruthState(Protocol):
+    """The true target at one instant (m, m/s), e.g. ``sitl.target.TargetState``."""
+
+    @property
+    def east_m(self) -> float: ...
+    @property
+    def north_m(self) -> float: ...
+    @property
+    def v_east_m_s(self) -> float: ...
+    @property
+    def v_north_m_s(self) -> float: ...
+
+
+class Truth(Protocol):
+    """A scripted target known to the station (``sitl.target.TargetPath``), to score against."""
+
+    def state_at(self, t_s: float) -> TruthState: ...
+    def segment_at(self, t_s: float) -> str: ...
+
+
+@dataclass(frozen=True, slots=True)
+class HeardStatuses:
+    """The newest statuses of one or more vehicles, heard at once."""
+
+    reports: tuple[tuple[int, VehicleReport], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class HeardLocal:
+    estimate: LocalEstimate
+
+
+GroundInput = HeardStatuses | HeardLocal
+
+
+@dataclass(frozen=True, slots=True)
+class MissionUpdate:
+    """The stage and the active team, and the phase spacing they are to keep (rad)."""
+
+    t_s: float
+    stage: Stage
+    active: tuple[int, ...]
+    spacing_rad: float
+
+
+@dataclass(frozen=True, slots=True)
+class GroundOutbox:
+    """What one step wants sent or recorded. ``tick_t_s``: the mission time of the tick this
+    step ran (None: no tick); then ``fused`` to publish (None when not due), ``mission`` when
+    due, the ``sample`` recorded (None with neither truth nor estimate) and events."""
+
+    tick_t_s: float | None = None
+    fused: GlobalEstimate | None = None
+    mission: MissionUpdate | None = None
+    sample: TeamSample | None = None
+    events: tuple[GroundEvent, ...] = ()
+
+
+_EMPTY = GroundOutbox()
+
+
+def step(
+    state: GroundState, event: GroundInput, params: GroundParams, truth: Truth | None = None
+) -> tuple[GroundState, GroundOutbox]:
+    """Deliver one input to the station; statuses that take mission time to the next tick
+    run it (``tick``). Samples are scored against ``truth`` when given, else the orbit is
+    scored about the estimate."""
+    match event:
+        case HeardLocal(estimate):
+            return hear_local(state, estimate), _EMPTY
+        case HeardStatuses(reports):
+            for vehicle, report in reports:
+                state = hear_status(state, vehicle, report)
+    t = state.mission_t_s
+    if not state.ticks.due(t):
+        return state, _EMPTY
+    state = replace(state, ticks=state.ticks.sent(t))
+    state, fused, events = tick(state, params)
+    mission = None
+    stage = state.stage.stage
+    if stage is not state.announced or state.announcements.due(t):
+        state = replace(state, announced=stage, announcements=state.announcements.sent(t))
+        mission = MissionUpdate(t, stage, state.active, desired_spacing_rad(state))
+    sample = team_sample(state, t, params, truth)
+    return state, GroundOutbox(t, fused, mission, sample, events)
+
+
+def estimate_at(
+    state: GroundState, t_s: float, params: GroundParams
+) -> tuple[float, float, float, float] | None:
+    """The fused estimate predicted to ``t_s`` as (east, north, v_east, v_north); None before
+    the first."""
+    fused = state.fused
+    if fused is None:
+        return None
+    x = params.prediction_model.transition(t_s - fused.t_s) @ fused.x
+    return float(x[0]), float(x[2]), float(x[1]), float(x[3])
+
+
+def team_sample(
+    state: GroundState, t_s: float, params: GroundParams, truth: Truth | None = None
+) -> TeamSample | None:
+    """The team at ``t_s`` (each vehicle dead-reckoned from its newest report) and the target:
+    the true one when ``truth`` is given, else the estimate (None before there is one)."""
+    estimate = estimate_at(state, t_s, params)
+    if truth is not None:
+        true = truth.state_at(t_s)
+        segment = truth.segment_at(t_s)
+        target = (true.east_m, true.north_m, true.v_east_m_s, true.v_north_m_s)
+    elif estimate is not None:
+        # no truth: the orbit is scored about the estimate, which has nothing to be scored
+        # against itself (an estimation error here would read 0)
+        segment, target, estimate = "estimated", estimate, None
+    else:
+        return None
+    active = set(state.active)
+    vehicles = tuple(
+        VehicleSample(
+            v,
+            v in active,
+            *dead_reckon(r.east_m, r.north_m, r.course_rad, r.speed_m_s, t_s - r.t_s),
+            r.speed_m_s,
+            r.course_rad,
+        )
+        for v, r in state.reports
+    )
+    return TeamSample(t_s, state.stage.stage.value, segment, *target, estimate, vehicles)

@@ -7,7 +7,7 @@ Pure: time is an argument, the state is a frozen value.
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
@@ -42,6 +42,16 @@ def spacing_errors(polar_angles_rad: Sequence[float]) -> list[float]:
     if n == 0:
         return []
     return [gap - TAU / n for gap in adjacent_phase_gaps(polar_angles_rad)]
+
+
+def vehicle_spacing_errors(polar_angles_rad: Mapping[int, float]) -> dict[int, float]:
+    """``spacing_errors`` by vehicle: each one's counter-clockwise gap to its neighbour minus
+    2 pi / n (radians, signed); empty for fewer than two vehicles."""
+    if len(polar_angles_rad) < 2:
+        return {}
+    ordered = sorted((a % TAU, v) for v, a in polar_angles_rad.items())
+    errors = spacing_errors([a for a, _ in ordered])
+    return {v: e for (_, v), e in zip(ordered, errors, strict=True)}
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,11 +16,15 @@ Before the tracking command, or while no estimate of the target exists, the vehi
 around its standby point with the same guidance field (a stationary "target" at the standby
 point, no phase keeping). A vehicle that the ground station has left out of the formation keeps
 orbiting the target without phase keeping, so it never steers on a stale spacing.
+
+``step`` is the one entry for every driver (the fast simulation, the async agent loop, live or
+in-process): it takes one ``AgentInput`` and returns the new state and an ``AgentOutbox`` of
+what is to be sent or recorded; when the local estimate and the status are due is part of the
+state (``MissionAgentState.estimates``, ``.statuses``).
 """
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
 
 from app.core.agent import (
     AgentEvent,
@@ -35,11 +39,11 @@ from app.core.agent import (
 )
 from app.core.estimation.federated import MainParams, apply_feedback
 from app.core.estimation.local import LocalParams, LocalState, StepReport, local_step
-from app.core.estimation.messages import GlobalEstimate, Observation
+from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.core.estimation.models import MotionModel
-
-StageName = Literal["standby", "gather", "adjust", "track"]
-STAGES: tuple[StageName, ...] = ("standby", "gather", "adjust", "track")
+from app.core.mission.schedule import Every
+from app.core.mission.stage import Stage
+from app.core.mission.team import dead_reckon
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,10 +59,7 @@ class TeammateFix:
     def at(self, t_s: float, max_extrapolation_s: float) -> tuple[float, float]:
         """Position dead-reckoned to ``t_s`` along the last course (at most the given span)."""
         dt = min(max(t_s - self.t_s, 0.0), max_extrapolation_s)
-        return (
-            self.east_m + self.speed_m_s * math.sin(self.course_rad) * dt,
-            self.north_m + self.speed_m_s * math.cos(self.course_rad) * dt,
-        )
+        return dead_reckon(self.east_m, self.north_m, self.course_rad, self.speed_m_s, dt)
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,22 +124,33 @@ class MissionAgentParams:
 
 @dataclass(frozen=True, slots=True)
 class MissionAgentState:
-    """Everything one agent remembers."""
+    """Everything one agent remembers; ``estimates`` and ``statuses`` say when the local
+    estimate and the vehicle's status are next due (``step``)."""
 
     local: LocalState
     guidance: AgentState = field(default_factory=AgentState)
     standby_guidance: AgentState = field(default_factory=AgentState)
     fused: GlobalEstimate | None = None
-    stage: StageName = "standby"
+    stage: Stage = Stage.STANDBY
     active: tuple[int, ...] = ()
     teammates: tuple[tuple[int, TeammateFix], ...] = ()
     holding: bool = False
     #: the (course rad, speed m/s) command of the last tick, for the latency compensation
     last_command: tuple[float, float] | None = None
+    estimates: Every = field(default_factory=lambda: Every(0.2))
+    statuses: Every = field(default_factory=lambda: Every(0.1))
 
 
-def initial_agent_state(params: MissionAgentParams) -> MissionAgentState:
-    return MissionAgentState(local=LocalState(sensor=params.sensor))
+def initial_agent_state(
+    params: MissionAgentParams, estimate_period_s: float = 0.2, status_period_s: float = 0.1
+) -> MissionAgentState:
+    """A fresh agent that publishes its local estimate at most every ``estimate_period_s`` and
+    its vehicle's status every ``status_period_s`` (vehicle time; 0: at every chance)."""
+    return MissionAgentState(
+        local=LocalState(sensor=params.sensor),
+        estimates=Every(estimate_period_s),
+        statuses=Every(status_period_s),
+    )
 
 
 def observe(
@@ -165,9 +177,11 @@ def hear_mission(
     state: MissionAgentState, stage: str, active: tuple[int, ...]
 ) -> MissionAgentState:
     """The ground station's stage and active team (sorted, unique vehicle ids)."""
-    if stage not in STAGES:
-        raise ValueError(f"unknown stage {stage!r}")
-    return replace(state, stage=stage, active=tuple(sorted(set(active))))
+    try:
+        known = Stage(stage)
+    except ValueError:
+        raise ValueError(f"unknown stage {stage!r}") from None
+    return replace(state, stage=known, active=tuple(sorted(set(active))))
 
 
 def hear_teammate(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
@@ -264,3 +278,146 @@ def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentPar
     moving = math.hypot(target.v_east_m_s, target.v_north_m_s) > params.moving_speed_m_s
     tracking = state.stage == "track" or (state.stage == "adjust" and moving)
     return params.track if tracking else params.agent
+
+
+# --- the step every driver pumps ------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class AgentStatus:
+    """What the agent reports of its vehicle (m, rad clockwise from north, m/s; ``phase_rad``
+    the polar angle about the target as best known, counter-clockwise from east, 0 when none)."""
+
+    t_s: float
+    east_m: float
+    north_m: float
+    course_rad: float
+    speed_m_s: float
+    phase_rad: float
+    stage: Stage
+    healthy: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Observed:
+    """A camera's (or the ground's) observation of the target."""
+
+    observation: Observation
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry:
+    """The vehicle's own telemetry of time ``t_s``: the status goes out when due."""
+
+    t_s: float
+    own: OwnTelemetry
+
+
+@dataclass(frozen=True, slots=True)
+class Control:
+    """One control tick on the vehicle's telemetry of time ``t_s`` (``control``)."""
+
+    t_s: float
+    own: OwnTelemetry
+
+
+@dataclass(frozen=True, slots=True)
+class HeardFused:
+    estimate: GlobalEstimate
+
+
+@dataclass(frozen=True, slots=True)
+class HeardMission:
+    stage: str
+    active: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class HeardTeammate:
+    vehicle: int
+    fix: TeammateFix
+
+
+@dataclass(frozen=True, slots=True)
+class Hold:
+    """Stop (True) or resume (False) commanding the vehicle."""
+
+    holding: bool
+
+
+AgentInput = Observed | Telemetry | Control | HeardFused | HeardMission | HeardTeammate | Hold
+
+
+@dataclass(frozen=True, slots=True)
+class AgentOutbox:
+    """What one step wants sent or recorded: the vehicle ``command`` (None while holding), the
+    local ``estimate`` to publish, the vehicle's ``status``, the observation's ``report``
+    (used, or why not), the ``stage`` when the step changed it, and events."""
+
+    command: Command | None = None
+    estimate: LocalEstimate | None = None
+    status: AgentStatus | None = None
+    report: StepReport | None = None
+    stage: Stage | None = None
+    events: tuple[AgentEvent, ...] = ()
+
+
+_EMPTY = AgentOutbox()
+
+
+def step(
+    state: MissionAgentState, event: AgentInput, params: MissionAgentParams
+) -> tuple[MissionAgentState, AgentOutbox]:
+    """Deliver one input to the agent: the new state and what it wants sent or recorded.
+
+    Raises ValueError for a non-finite telemetry frame (``Control``), which must never be
+    steered on."""
+    match event:
+        case Observed(obs):
+            state, report = observe(state, obs, params)
+            estimate = None
+            if report.used and state.estimates.due(obs.t_s):
+                estimate = state.local.estimate()
+                if estimate is not None:
+                    state = replace(state, estimates=state.estimates.sent(obs.t_s))
+            return state, AgentOutbox(estimate=estimate, report=report)
+        case Telemetry(t, own):
+            if not state.statuses.due(t):
+                return state, _EMPTY
+            return replace(state, statuses=state.statuses.sent(t)), AgentOutbox(
+                status=_status(state, t, own, params)
+            )
+        case Control(t, own):
+            state, command, events = control(state, t, own, params)
+            return state, AgentOutbox(command=None if state.holding else command, events=events)
+        case HeardFused(estimate):
+            return hear_fused(state, estimate, params), _EMPTY
+        case HeardMission(stage, active):
+            before = state.stage
+            state = hear_mission(state, stage, active)
+            return state, AgentOutbox(stage=state.stage) if state.stage != before else _EMPTY
+        case HeardTeammate(vehicle, fix):
+            return hear_teammate(state, vehicle, fix), _EMPTY
+        case Hold(holding):
+            return set_holding(state, holding), _EMPTY
+
+
+def _status(
+    state: MissionAgentState, t_s: float, own: OwnTelemetry, params: MissionAgentParams
+) -> AgentStatus:
+    target = target_at(state, t_s, params)
+    phase = (
+        0.0
+        if target is None
+        else math.atan2(own.north_m - target.north_m, own.east_m - target.east_m)
+    )
+    return AgentStatus(
+        t_s,
+        own.east_m,
+        own.north_m,
+        own.course_rad,
+        max(own.speed_m_s, 0.0),
+        phase,
+        state.stage,
+        not state.holding,
+    )
