@@ -10,9 +10,9 @@ import pytest
 from app.config import load_config
 from app.config.scenario import ScenarioConfig, build_setup
 from app.core.agent import AgentState
+from app.core.mission.stage import adjacent_phase_differences
 from app.runtime.fastsim import (
     SimulationSetup,
-    adjacent_phase_differences,
     circle_crossings,
     phase_figures,
     phase_lower_bound_s,

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from app.config import load_config
 from app.config.scenario import ScenarioConfig, build_setup
+from app.core.sampled_run import SimulationResult
 from app.errors import ConfigError
 from app.runtime.fastsim import (
-    SimulationResult,
     SimulationSetup,
     phase_figures,
     phase_lower_bound_s,

@@ -13,7 +13,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from app.runtime.fastsim import SimulationResult, adjacent_phase_differences
+from app.core.mission.stage import adjacent_phase_differences
+from app.core.sampled_run import SimulationResult
 
 _COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 

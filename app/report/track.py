@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.runtime.fastsim import SimulationResult
+from app.core.sampled_run import SimulationResult
 
 TRACK_COLUMNS = (
     "t_s",

@@ -23,12 +23,12 @@ from app.core.agent import (
     TargetInfo,
     agent_step,
 )
+from app.core.frames import TAU
+from app.core.mission.stage import adjacent_phase_differences
 from app.core.phase import orbit_order, phase_time_lower_bound
+from app.core.sampled_run import FloatArray, SimulationResult
 from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 from sitl.target import TargetPath
-
-FloatArray = NDArray[np.float64]
-TAU = 2.0 * math.pi
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,50 +57,6 @@ class SimulationSetup:
             raise ValueError(f"dt_s must be finite and > 0, got {self.dt_s!r}")
         if not (math.isfinite(self.duration_s) and self.duration_s >= self.dt_s):
             raise ValueError(f"duration_s must be finite and >= dt_s, got {self.duration_s!r}")
-
-
-@dataclass(frozen=True, slots=True)
-class SimulationResult:
-    """Sampled run: ``t_s`` shape (m,); per-vehicle arrays shape (m, n); target arrays (m,).
-
-    ``course_rate_rad_s`` and ``accel_m_s2`` at row j are those applied over the step that
-    ended at ``t_s[j]`` (0 in row 0). ``events`` are (vehicle index, event) in time order.
-    """
-
-    t_s: FloatArray
-    east_m: FloatArray
-    north_m: FloatArray
-    course_rad: FloatArray
-    speed_m_s: FloatArray
-    course_rate_rad_s: FloatArray
-    accel_m_s2: FloatArray
-    c: FloatArray
-    inverse: NDArray[np.bool_]
-    target_east_m: FloatArray
-    target_north_m: FloatArray
-    radius_m: float
-    orbit_sign: int
-    events: tuple[tuple[int, AgentEvent], ...]
-
-    @property
-    def n_vehicles(self) -> int:
-        return int(self.east_m.shape[1])
-
-    def distance_error_m(self) -> FloatArray:
-        """r - r_d per sample and vehicle, m (negative inside the circle)."""
-        return (
-            np.hypot(
-                self.east_m - self.target_east_m[:, None],
-                self.north_m - self.target_north_m[:, None],
-            )
-            - self.radius_m
-        )
-
-    def phases_rad(self) -> FloatArray:
-        """Polar angle about the target times the orbit sign (grows along the orbit), rad."""
-        return self.orbit_sign * np.arctan2(
-            self.north_m - self.target_north_m[:, None], self.east_m - self.target_east_m[:, None]
-        )
 
 
 def run_simulation(
@@ -223,15 +179,6 @@ def circle_crossings(error: FloatArray, depth_m: float = 0.5) -> int:
             elif not outside and value >= 0.0:
                 outside = True
     return total
-
-
-def adjacent_phase_differences(phases_rad: FloatArray) -> FloatArray:
-    """For each sample, the n gaps (rad, in [0, 2 pi)) between each vehicle and the next one
-    ahead along the orbit, in orbit order starting from the vehicle at rank 0; shape (m, n)."""
-    sorted_rel = np.sort((phases_rad - phases_rad[:, :1]) % TAU, axis=1)
-    ahead = np.roll(sorted_rel, -1, axis=1)
-    ahead[:, -1] += TAU
-    return ahead - sorted_rel
 
 
 def phase_settle_time_s(

@@ -11,6 +11,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
+import numpy as np
+from numpy.typing import NDArray
+
 from app.core.frames import TAU
 
 
@@ -52,6 +55,15 @@ def vehicle_spacing_errors(polar_angles_rad: Mapping[int, float]) -> dict[int, f
     ordered = sorted((a % TAU, v) for v, a in polar_angles_rad.items())
     errors = spacing_errors([a for a, _ in ordered])
     return {v: e for (_, v), e in zip(ordered, errors, strict=True)}
+
+
+def adjacent_phase_differences(phases_rad: NDArray[np.float64]) -> NDArray[np.float64]:
+    """For each sample, the n gaps (rad, in [0, 2 pi)) between each vehicle and the next one
+    ahead along the orbit, in orbit order starting from the vehicle at rank 0; shape (m, n)."""
+    sorted_rel = np.sort((phases_rad - phases_rad[:, :1]) % TAU, axis=1)
+    ahead = np.roll(sorted_rel, -1, axis=1)
+    ahead[:, -1] += TAU
+    return ahead - sorted_rel
 
 
 @dataclass(frozen=True, slots=True)
