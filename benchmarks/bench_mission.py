@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_mission [CONFIG] [--out DIR] [--speedup X] [--seed N]
 
 Flies ``configs/hil.toml`` (the paper's section 5.2 mission, Table 2) exactly as ``standoff fly``
-does: ``build_plan`` + ``run_mission`` with the built-in simulator in its own process, MAVSDK
+does: ``build_plan`` + ``Mission.run`` with the built-in simulator in its own process, MAVSDK
 links over UDP, the in-process bus, the ground station and three agents. Then prints, from the
 run's ``summary.json`` and recorded samples:
 
@@ -29,11 +29,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from app.compose.mission import Mission
+from app.compose.parts import MissionResult
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.report.summary import TeamSample
-from app.runtime.mission import MissionResult, run_mission
+from app.core.mission.team import TeamSample
 from sitl.ports import find_free_udp_base_port
 
 WALL_LIMIT_S = 180.0
@@ -108,7 +109,7 @@ def report(result: MissionResult, radius_m: float, path_end_s: float, total_wall
     print(f"run folder {result.out_dir}")
     print(f"mission time {summary['mission_t_s']:.1f} s of {summary['end_t_s']:.1f} s")
     wall = float(summary["wall_s"])
-    line("wall time, run_mission (s)", fmt(wall), wall <= WALL_LIMIT_S, f"<= {WALL_LIMIT_S:.0f}")
+    line("wall time, Mission.run (s)", fmt(wall), wall <= WALL_LIMIT_S, f"<= {WALL_LIMIT_S:.0f}")
     line("wall time, with start-up (s)", fmt(total_wall_s), None)
     line("interrupted", str(summary["interrupted"]), summary["interrupted"] is False)
     print("gather + adjust, from the tracking command")
@@ -182,9 +183,7 @@ def report(result: MissionResult, radius_m: float, path_end_s: float, total_wall
 async def fly(config: MissionConfig, out_dir: Path) -> MissionResult:
     plan = build_plan(config)
     async with asyncio.timeout(15 * 60):
-        return await run_mission(
-            plan, out_dir, base_port=find_free_udp_base_port(plan.count), sim_mode="process"
-        )
+        return await Mission(plan, out_dir, base_port=find_free_udp_base_port(plan.count)).run()
 
 
 def main() -> None:

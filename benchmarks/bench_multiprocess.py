@@ -3,7 +3,7 @@
     python -m benchmarks.bench_multiprocess [CONFIG] [--out DIR] [--broker URL]
 
 Flies CONFIG (default: the paper's section 5.2 mission, ``configs/hil.toml``) on the built-in
-simulator first with ``run_mission`` (in-process bus), then as ``standoff ground --sitl`` plus
+simulator first with ``Mission.run`` (in-process bus), then as ``standoff ground --sitl`` plus
 one ``standoff agent`` per vehicle, each a process of its own, over a mosquitto started on a free
 loopback port (or ``--broker``). Prints the summary figures side by side with their ratio
 (multi-process / in-process): the gather + adjust times from the tracking command, and the RMS
@@ -31,10 +31,10 @@ from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
+from app.compose.mission import Mission
 from app.config import load_config, resolve_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.mission import run_mission
 from sitl.ports import find_free_udp_base_port
 
 STARTUP_TIMEOUT_S = 60.0
@@ -43,7 +43,7 @@ STARTUP_TIMEOUT_S = 60.0
 async def in_process(config_name: str, out: Path) -> dict[str, Any]:
     config = load_config(config_name, MissionConfig).model_copy(update={"bus": None})
     plan = build_plan(config)
-    result = await run_mission(plan, out, base_port=find_free_udp_base_port(plan.count))
+    result = await Mission(plan, out, base_port=find_free_udp_base_port(plan.count)).run()
     return result.summary
 
 

@@ -3,7 +3,8 @@ import math
 
 from rich.console import Console
 
-from app.adapters.live_view import LiveView, MissionSnapshot, VehicleRow
+from app.adapters.live_view import LiveView
+from app.runtime.ports.view import MissionSnapshot, VehicleRow
 
 ROWS = (
     VehicleRow(0, 1.25, -0.5, 14.0, "ok", True),

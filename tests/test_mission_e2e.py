@@ -3,7 +3,8 @@ bus, the ground station and three agents, with faults injected while they fly.
 
 Every scenario flies ``configs/test-short.toml`` (the hil team and limits; the target waits 60 s,
 drives 120 m north at 3 m/s and stops) at a 3x speed-up on free ports, with the simulator in
-this event loop (``sim_mode="inline"``) so that hooks can reach it. Each scenario runs once per
+this event loop (given to the ``Mission``) so that the test's hooks can reach it; the hooks run
+beside the mission, on its mission time, over its public parts. Each scenario runs once per
 module and several tests read its results:
 
 - the full mission, with garbage injected on the bus on the way: the run folder, the figures,
@@ -30,19 +31,23 @@ from typing import Any
 import numpy as np
 import pytest
 import pytest_asyncio
-from app.core.ground import team_view
-from app.core.stage import Stage, spacing_errors
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.bus import InProcessBus, encode
+from app.compose.mission import Mission
+from app.compose.parts import MissionResult
 from app.config import load_config
 from app.config.mission import MissionConfig
-from app.config.plan import build_plan
+from app.config.plan import MissionPlan, build_plan, sim_config
 from app.config.schema import WaypointTargetConfig
 from app.core.frames import TAU, wrap_pi
-from app.runtime.mission import Hook, MissionContext, MissionResult, run_mission
+from app.core.mission.ground import team_view
+from app.core.mission.stage import Stage, spacing_errors
+from app.runtime.agent import VehicleAgent
+from app.runtime.ground import GroundStation
 from app.runtime.ports import topics
+from app.runtime.ports.bus import Bus
 from app.runtime.ports.messages import MissionState
 from sitl.ports import find_free_udp_base_port
 from sitl.server import SimTruth, SimulatorServer
@@ -90,18 +95,55 @@ def short_config(end_s: float | None = None, leg_north_m: float | None = None) -
     return config.model_copy(update=update)
 
 
+@dataclass
+class MissionContext:
+    """What the hooks reach while a mission flies: its plan, the simulator and its parts."""
+
+    plan: MissionPlan
+    sim: SimulatorServer
+    mission: Mission
+
+    @property
+    def ground(self) -> GroundStation:
+        assert self.mission.ground is not None
+        return self.mission.ground
+
+    @property
+    def agents(self) -> list[VehicleAgent]:
+        return self.mission.agents
+
+    @property
+    def buses(self) -> list[Bus]:
+        return self.mission.buses
+
+
+Hook = Callable[[MissionContext], None]
+
+
+async def run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) -> None:
+    """Each hook once mission time reaches its time (checked every 20 ms of wall time)."""
+    pending = sorted(hooks, key=lambda h: h[0])
+    while pending:
+        if ctx.mission.ground is not None:
+            t = ctx.ground.state.mission_t_s
+            while pending and t >= pending[0][0]:
+                _, hook = pending.pop(0)
+                hook(ctx)
+        await asyncio.sleep(0.02)
+
+
 async def fly(
     out_dir: Path, hooks: Sequence[tuple[float, Hook]], config: MissionConfig
 ) -> MissionResult:
     plan = build_plan(config)
-    async with asyncio.timeout(WALL_TIMEOUT_S):
-        return await run_mission(
-            plan,
-            out_dir,
-            hooks=hooks,
-            sim_mode="inline",
-            base_port=find_free_udp_base_port(plan.count),
-        )
+    sim_config_ = sim_config(plan, find_free_udp_base_port(plan.count))
+    async with asyncio.timeout(WALL_TIMEOUT_S), SimulatorServer(sim_config_) as sim:
+        mission = Mission(plan, out_dir, simulator=sim)
+        async with asyncio.TaskGroup() as tg:
+            schedule = tg.create_task(run_hooks(hooks, MissionContext(plan, sim, mission)))
+            result = await mission.run()
+            schedule.cancel()
+        return result
 
 
 @dataclass(frozen=True)

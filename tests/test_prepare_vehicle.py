@@ -2,12 +2,13 @@
 
 import pytest
 
+from app.compose.parts import bring_up
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.errors import LinkError
-from app.runtime.mission import prepare_vehicle
 from app.runtime.ports.vehicle import CourseSpeedCommand, VehicleTelemetry
+from app.runtime.vehicle import prepare_vehicle
 from tests.fake_link import frame
 
 
@@ -65,7 +66,7 @@ class Events:
 async def test_a_vehicle_near_the_origin_is_armed_launched_and_put_in_offboard():
     plan = build_plan(load_config("hil", MissionConfig))
     link, events = FakeLink(frame_at(-1200.0, 300.0)), Events()
-    await prepare_vehicle(link, plan, events)  # type: ignore[arg-type]
+    await prepare_vehicle(link, bring_up(plan), events)  # type: ignore[arg-type]
     assert link.steps == ["ready", "arm", "take-off", "offboard"]
     assert events.kinds == ["offboard"]
 
@@ -75,5 +76,5 @@ async def test_a_vehicle_far_from_the_mission_origin_is_refused_before_it_is_arm
     plan = build_plan(load_config("hil", MissionConfig))
     link = FakeLink(frame_at(-2.744e6, 1.855e6))
     with pytest.raises(LinkError, match=r"vehicle 2 is 3312 km from the mission's origin"):
-        await prepare_vehicle(link, plan, Events())  # type: ignore[arg-type]
+        await prepare_vehicle(link, bring_up(plan), Events())  # type: ignore[arg-type]
     assert link.steps == ["ready"]

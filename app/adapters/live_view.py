@@ -5,7 +5,6 @@ most every ``plain_interval_s`` of mission time, so logs stay readable.
 """
 
 import math
-from dataclasses import dataclass
 from types import TracebackType
 from typing import Self
 
@@ -14,24 +13,7 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-
-@dataclass(frozen=True, slots=True)
-class VehicleRow:
-    vehicle: int
-    distance_error_m: float
-    spacing_error_deg: float
-    speed_m_s: float
-    link: str
-    active: bool
-
-
-@dataclass(frozen=True, slots=True)
-class MissionSnapshot:
-    t_s: float
-    end_t_s: float
-    stage: str
-    target_segment: str
-    vehicles: tuple[VehicleRow, ...]
+from app.runtime.ports.view import MissionSnapshot
 
 
 def _fmt(value: float, spec: str) -> str:

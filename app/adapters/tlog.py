@@ -15,6 +15,8 @@ from typing import BinaryIO, Self
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from app.runtime.ports.vehicle import VehicleLink
+
 # PX4 custom mode: main mode in bits 16-23 (6 = offboard, 4 = auto with sub mode 3 = loiter)
 PX4_CUSTOM_MODES = {"offboard": 6 << 16, "hold": (4 << 16) | (3 << 24)}
 
@@ -109,3 +111,23 @@ class TlogWriter:
         for message in messages:
             self._file.write(stamp + message.pack(self._mav))
             self.records += 1
+
+
+async def record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
+    """Write every telemetry frame of ``link`` to ``writer`` until the link closes."""
+    async for f in link.telemetry():
+        writer.write(
+            TlogSample(
+                f.t_s,
+                f.latitude_deg,
+                f.longitude_deg,
+                f.altitude_m,
+                f.relative_altitude_m,
+                f.ground_speed_m_s * math.cos(f.course_rad),
+                f.ground_speed_m_s * math.sin(f.course_rad),
+                f.course_rad,
+                f.ground_speed_m_s,
+                armed=f.armed,
+                mode=f.flight_mode.lower(),
+            )
+        )

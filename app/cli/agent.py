@@ -7,10 +7,10 @@ from pathlib import Path
 
 from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.cli._options import add_mission_options, broker_url, with_overrides
+from app.compose.distributed import agent_url, run_agent
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.distributed import agent_url, run_agent
 
 ORDER = 13
 

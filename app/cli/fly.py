@@ -11,10 +11,10 @@ from rich.console import Console
 
 from app.adapters.live_view import LiveView
 from app.cli._options import add_mission_options, with_overrides
+from app.compose.mission import Mission
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.mission import run_mission
 
 ORDER = 10
 
@@ -63,14 +63,14 @@ def run(args: argparse.Namespace) -> int:
     view = LiveView(console) if not args.quiet else None
     with view if view is not None else contextlib.nullcontext():
         result = asyncio.run(
-            run_mission(
+            Mission(
                 plan,
                 out,
                 connect=args.connect or (),
                 broker_url=args.broker,
                 base_port=args.base_port,
                 on_snapshot=view.update if view is not None else None,
-            )
+            ).run()
         )
     console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)
     return 0

@@ -11,10 +11,10 @@ from rich.console import Console
 from app.adapters.live_view import LiveView
 from app.cli._options import add_mission_options, broker_url, with_overrides
 from app.cli.fly import default_out_dir, report
+from app.compose.distributed import run_ground
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.distributed import run_ground
 
 ORDER = 12
 

@@ -2,16 +2,13 @@
 
 import argparse
 import asyncio
-import contextlib
-import signal
 import sys
-from typing import TextIO
 
+from app.compose.simulator import serve
 from app.config import load_config
 from app.config.simulator import SitlScenario
-from app.errors import ConfigError, LinkError
+from app.errors import ConfigError
 from sitl.config import SimConfig
-from sitl.server import SimulatorServer
 
 ORDER = 20
 
@@ -90,59 +87,3 @@ def build_sim_config(args: argparse.Namespace) -> SimConfig:
 def run(args: argparse.Namespace) -> int:
     config = build_sim_config(args)
     return asyncio.run(serve(config, args.duration, sys.stdout))
-
-
-async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int:
-    """Run the simulator, print its endpoints, stop on SIGINT/SIGTERM or after ``duration_s``."""
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError, RuntimeError):
-            loop.add_signal_handler(sig, stop.set)
-    try:
-        async with SimulatorServer(config) as sim:
-            _print_endpoints(sim, out)
-            async with asyncio.TaskGroup() as group:
-                timer = None
-                if duration_s is not None:
-                    timer = group.create_task(_stop_at(sim, duration_s, stop), name="sitl-timer")
-                await stop.wait()
-                if timer is not None:
-                    timer.cancel()
-            total = sim.stats_total()
-            print(
-                f"stopped at t = {sim.time_s:.1f} s simulated: {total.packets_in} packets in "
-                f"({total.dropped} dropped), {total.packets_out} out",
-                file=out,
-                flush=True,
-            )
-    except OSError as exc:  # a vehicle socket that cannot be bound (port taken, bad host)
-        raise LinkError(f"cannot open the vehicle sockets: {exc}") from exc
-    finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.remove_signal_handler(sig)
-    return 0
-
-
-async def _stop_at(sim: SimulatorServer, duration_s: float, stop: asyncio.Event) -> None:
-    await sim.wait_until(duration_s)
-    stop.set()
-
-
-def _print_endpoints(sim: SimulatorServer, out: TextIO) -> None:
-    config = sim.config
-    print(
-        f"standoff sitl: {len(sim.endpoints)} vehicles, speed-up {config.speedup:g}x, "
-        f"seed {config.seed}, origin {config.origin_lat_deg:.6f}, {config.origin_lon_deg:.6f}, "
-        f"autopilot {config.autopilot}",
-        file=out,
-    )
-    for endpoint in sim.endpoints:
-        print(
-            f"  vehicle {endpoint.system_id}: sends to {endpoint.gcs_host}:{endpoint.gcs_port} "
-            f"from {endpoint.local_host}:{endpoint.local_port}   "
-            f"MAVSDK: {endpoint.mavsdk_url}",
-            file=out,
-        )
-    print("running; Ctrl-C to stop", file=out, flush=True)

@@ -30,7 +30,7 @@ TRACK_COLUMNS = (
 @dataclass(frozen=True, slots=True)
 class TrackRow:
     """One vehicle at one time: m east/north of the origin, course rad clockwise from north, m/s;
-    ``extras`` line up with the writer's ``extra_columns``."""
+    ``extras`` line up with the writer's ``extra_columns`` (numbers, or words such as a stage)."""
 
     t_s: float
     vehicle: int
@@ -40,7 +40,7 @@ class TrackRow:
     speed_m_s: float
     target_east_m: float
     target_north_m: float
-    extras: tuple[float, ...] = ()
+    extras: tuple[float | str, ...] = ()
 
 
 def _fmt(value: float) -> str:
@@ -81,7 +81,7 @@ def write_track_csv(
                     f"{row.speed_m_s:.3f}",
                     _fmt(row.target_east_m),
                     _fmt(row.target_north_m),
-                    *(_fmt(x) for x in row.extras),
+                    *(x if isinstance(x, str) else _fmt(x) for x in row.extras),
                 )
             )
             count += 1

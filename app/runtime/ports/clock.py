@@ -26,3 +26,6 @@ class SystemClock:
 
     def monotonic_s(self) -> float:
         return time.monotonic()
+
+
+SYSTEM_CLOCK = SystemClock()

@@ -20,7 +20,6 @@ import json
 import logging
 import math
 import signal
-import time
 from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Sequence
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field
@@ -29,27 +28,30 @@ from typing import Any
 
 from app.adapters.bus import Backoff, Birth, BrokerUrl, Bus, MqttBus, Subscription, Will, open_bus
 from app.adapters.eventlog import EventLog
-from app.adapters.live_view import MissionSnapshot
-from app.adapters.tlog import TlogWriter
-from app.adapters.vehicle.mavsdk.hub import MavsdkHub
-from app.adapters.vehicle.mavsdk.link import LinkConfig
-from app.config.plan import MissionPlan
-from app.errors import BusError, ConfigError, LinkError, StandoffError
-from app.runtime.agent import AgentRuntimeParams, VehicleAgent
-from app.runtime.events import LoggingSink
-from app.runtime.ground import GroundRuntimeParams, GroundStation, Measurement
-from app.runtime.mission import (
+from app.adapters.tlog import record_tlog
+from app.compose.parts import (
     MissionResult,
-    observation_sources,
-    prepare_vehicle,
-    record_tlog,
+    bring_up,
+    counters_of,
+    ground_station,
+    open_links,
+    tlog_writer,
+    vehicle_agent,
     write_outputs,
 )
+from app.compose.simulator import simulator_process
+from app.config.plan import MissionPlan
+from app.errors import BusError, ConfigError, LinkError, StandoffError
+from app.runtime.agent import VehicleAgent
+from app.runtime.events import LoggingSink
+from app.runtime.ground import GroundStation, Measurement
 from app.runtime.ports import topics
+from app.runtime.ports.clock import SYSTEM_CLOCK, Clock
 from app.runtime.ports.events import EventSink
 from app.runtime.ports.messages import Command, LinkState
-from app.runtime.ports.vehicle import GeodeticOrigin, VehicleLink
-from app.runtime.sim_process import simulator_process
+from app.runtime.ports.vehicle import VehicleLink
+from app.runtime.ports.view import MissionSnapshot
+from app.runtime.vehicle import prepare_vehicle
 
 log = logging.getLogger(__name__)
 
@@ -266,6 +268,7 @@ async def run_ground(
     on_snapshot: Callable[[MissionSnapshot], None] | None = None,
     notify: Notify = _quiet,
     shutdown_grace_s: float = SHUTDOWN_GRACE_S,
+    clock: Clock = SYSTEM_CLOCK,
 ) -> MissionResult:
     """The ground-station process: run the mission to its end, stop the agents, write the run.
 
@@ -282,7 +285,7 @@ async def run_ground(
     ground: GroundStation | None = None
     interrupted = False
     stop = StopFlag()
-    wall_start = time.monotonic()
+    wall_start = clock.monotonic_s()
     try:
         async with AsyncExitStack() as stack:
             stack.enter_context(_forced(stop))
@@ -306,16 +309,12 @@ async def run_ground(
                 bus=_broker_name(broker_url),
                 simulator=sitl_base_port,
             )
-            ground = GroundStation(
-                plan.ground,
-                GroundRuntimeParams(end_t_s=plan.end_t_s),
+            ground = ground_station(
+                plan,
                 bus,
                 events,
-                truth=plan.target if builtin or cfg.observations.source == "simulated" else None,
-                sources=observation_sources(plan, replay),
-                external_observations=cfg.observations.external_topic
-                if cfg.observations.source == "external"
-                else None,
+                builtin=builtin,
+                replay=replay,
                 on_snapshot=on_snapshot,
                 name=GROUND_CLIENT,
             )
@@ -345,7 +344,7 @@ async def run_ground(
                             await shutdown.send()
     finally:
         # the agents hold their vehicles and the simulator is stopped; write the run folder
-        wall_s = time.monotonic() - wall_start
+        wall_s = clock.monotonic_s() - wall_start
         result = write_outputs(plan, out_dir, ground, eventlog, {}, wall_s, interrupted)
     return result
 
@@ -454,6 +453,7 @@ async def run_agent(
     *,
     builtin_simulator: bool = False,
     notify: Notify = _quiet,
+    clock: Clock = SYSTEM_CLOCK,
 ) -> AgentResult:
     """One agent process: fly ``vehicle`` (0-based) until the ground's shutdown or a signal.
 
@@ -478,7 +478,7 @@ async def run_agent(
         events.emit(
             "agent_start", 0.0, vehicle=vehicle, url=connect_url, bus=_broker_name(broker_url)
         )
-        flight = _Flight(plan, vehicle, bus, events, notify)
+        flight = _Flight(plan, vehicle, bus, events, notify, clock)
         try:
             async with _plain_errors(), asyncio.TaskGroup() as tg:
                 listener = tg.create_task(
@@ -541,9 +541,16 @@ class _Flight:
     """The vehicle side of an agent process: link, offboard, tlog, and the agent loop."""
 
     def __init__(
-        self, plan: MissionPlan, vehicle: int, bus: Bus, events: EventSink, notify: Notify
+        self,
+        plan: MissionPlan,
+        vehicle: int,
+        bus: Bus,
+        events: EventSink,
+        notify: Notify,
+        clock: Clock,
     ) -> None:
         self._plan = plan
+        self._clock = clock
         self._vehicle = vehicle
         self._bus = bus
         self._events = events
@@ -583,44 +590,20 @@ class _Flight:
         out: dict[str, Any] = {"bus": dataclasses.asdict(bus.stats)}
         if self._agent is not None:
             out["agent"] = dataclasses.asdict(self._agent.counters)
-        link_counters = getattr(self._link, "counters", None)
-        if dataclasses.is_dataclass(link_counters) and not isinstance(link_counters, type):
-            out["link"] = dataclasses.asdict(link_counters)
+        if (link_counters := counters_of(self._link)) is not None:
+            out["link"] = link_counters
         return out
 
     async def fly(self, url: str, out_dir: Path, builtin: bool) -> None:
-        plan, cfg, i = self._plan, self._plan.config, self._vehicle
-        autopilot = None if cfg.link.autopilot == "auto" else cfg.link.autopilot
-        if builtin:
-            autopilot = autopilot or "velocity"  # the built-in simulator takes velocity setpoints
-        origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
-        link_config = LinkConfig(
-            plan.setpoint_limits,
-            autopilot=autopilot,
-            link_timeout_s=cfg.link.link_timeout_s,
-        )
+        plan, i = self._plan, self._vehicle
+        self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
         async with AsyncExitStack() as stack:
-            hub = await stack.enter_async_context(MavsdkHub([url], origin))
-            self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
-            link = await stack.enter_async_context(
-                hub.link(i + 1, link_config, timeout_s=cfg.link.connect_timeout_s)
-            )
-            self._link = link
-            await prepare_vehicle(link, plan, self._events)
+            links = await stack.enter_async_context(open_links(plan, [url], [i], builtin))
+            link = self._link = links[i]
+            await prepare_vehicle(link, bring_up(plan), self._events)
             self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
-            tlog = stack.enter_context(
-                TlogWriter(out_dir / f"vehicle-{i + 1}.tlog", i + 1, time.time())
-            )
-            self._agent = VehicleAgent(
-                plan.agents[i],
-                link,
-                self._bus,
-                self._events,
-                AgentRuntimeParams(
-                    altitude_m=cfg.link.altitude_m,
-                    clock_rate=cfg.sim.speedup if builtin else 1.0,
-                ),
-            )
+            tlog = stack.enter_context(tlog_writer(out_dir, i, self._clock))
+            self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin)
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(record_tlog(link, tlog), name=f"tlog-{i + 1}")
                 tg.create_task(self._agent.run(), name=self._agent.name)

@@ -1,0 +1,200 @@
+"""A whole mission in one process (``standoff fly``): vehicles, links, bus, ground and agents.
+
+``Mission(plan, out_dir).run()`` opens everything in order (simulator, MAVSDK links, bus
+clients, logs), brings each vehicle to offboard control, runs the ground station and one agent
+per vehicle until the scenario ends, and writes the run folder. Leaving it in any way (the end,
+an error, Ctrl-C) puts every vehicle in hold and closes every log.
+"""
+
+import asyncio
+import logging
+from collections.abc import Callable, Sequence
+from contextlib import AsyncExitStack
+from pathlib import Path
+
+from app.adapters.bus import BrokerUrl, InProcessBroker, Will, open_bus
+from app.adapters.eventlog import EventLog
+from app.adapters.tlog import record_tlog
+from app.adapters.vehicle.mavsdk.urls import validate_url
+from app.compose.parts import (
+    MissionResult,
+    bring_up,
+    ground_station,
+    open_links,
+    tlog_writer,
+    vehicle_agent,
+    write_outputs,
+)
+from app.compose.simulator import simulator_process
+from app.config.plan import MissionPlan
+from app.runtime.agent import VehicleAgent
+from app.runtime.events import LoggingSink
+from app.runtime.ground import GroundStation, Measurement
+from app.runtime.ports import topics
+from app.runtime.ports.bus import Bus
+from app.runtime.ports.clock import SYSTEM_CLOCK, Clock
+from app.runtime.ports.events import EventSink
+from app.runtime.ports.messages import LinkState
+from app.runtime.ports.vehicle import VehicleLink
+from app.runtime.ports.view import MissionSnapshot
+from app.runtime.vehicle import hold_all, prepare_vehicle
+from sitl.ports import find_free_udp_base_port, udp_ports_free
+from sitl.server import SimulatorServer
+
+log = logging.getLogger(__name__)
+
+
+class Mission:
+    """One mission flown in this process: ``run`` flies it to its end and writes the run folder.
+
+    Its parts (``links``, ``ground``, ``agents``, ``buses``) are public once built (``ground``
+    is None until then), for whoever watches the mission while it runs. ``simulator``: a
+    built-in simulator already serving the plan in this event loop, flown instead of one in a
+    process of its own (sharing one interpreter with the mission; a test reaches its vehicles).
+    """
+
+    def __init__(
+        self,
+        plan: MissionPlan,
+        out_dir: Path,
+        *,
+        connect: Sequence[str] = (),
+        broker_url: str | None = None,
+        base_port: int | None = None,
+        replay: Sequence[Measurement] = (),
+        on_snapshot: Callable[[MissionSnapshot], None] | None = None,
+        simulator: SimulatorServer | None = None,
+        clock: Clock = SYSTEM_CLOCK,
+    ) -> None:
+        cfg = plan.config
+        self.plan = plan
+        self.out_dir = out_dir
+        self.urls = list(connect or cfg.link.connect)
+        self.builtin = not self.urls
+        self.broker_url = broker_url if broker_url is not None else cfg.bus
+        # a bad URL is a ConfigError here, before anything is started or written
+        for url in self.urls:
+            validate_url(url)
+        if self.broker_url is not None:
+            BrokerUrl.parse(self.broker_url)
+        self.links: dict[int, VehicleLink] = {}
+        self.ground: GroundStation | None = None
+        self.agents: list[VehicleAgent] = []
+        self.buses: list[Bus] = []
+        self.interrupted = False
+        self._base_port = base_port
+        self._replay = replay
+        self._on_snapshot = on_snapshot
+        self._simulator = simulator
+        self._clock = clock
+
+    async def run(self) -> MissionResult:
+        """Fly the plan to its end; write and return the run's results (also when interrupted)."""
+        wall_start = self._clock.monotonic_s()
+        eventlog = EventLog(self.out_dir / "events.jsonl")
+        try:
+            async with AsyncExitStack() as stack:
+                stack.enter_context(eventlog)
+                await self._fly(stack, LoggingSink(eventlog))
+        finally:
+            # every vehicle is in hold and every log closed by now; write the run folder
+            wall_s = self._clock.monotonic_s() - wall_start
+            result = write_outputs(
+                self.plan,
+                self.out_dir,
+                self.ground,
+                eventlog,
+                self.links,
+                wall_s,
+                self.interrupted,
+                self.agents,
+            )
+        return result
+
+    async def _vehicle_urls(self, stack: AsyncExitStack) -> list[str]:
+        """The vehicles' URLs: the given ones, else the built-in simulator's (started here
+        in a process of its own unless one was given)."""
+        plan, cfg = self.plan, self.plan.config
+        if not self.builtin:
+            return self.urls
+        if self._simulator is not None:
+            port = self._simulator.config.base_port
+        else:
+            port = self._base_port if self._base_port is not None else cfg.sim.base_port
+            if self._base_port is None and not udp_ports_free(port, plan.count):
+                # another simulator or SITL is on the default ports: take free ones
+                port = find_free_udp_base_port(plan.count)
+                log.warning(
+                    "UDP %d.. busy: the built-in simulator uses %d..", cfg.sim.base_port, port
+                )
+            await stack.enter_async_context(simulator_process(cfg, plan.count, port, self.out_dir))
+        return [f"udpin://127.0.0.1:{port + i}" for i in range(plan.count)]
+
+    async def _fly(self, stack: AsyncExitStack, events: EventSink) -> None:
+        """Open the parts on ``stack`` and fly (``interrupted`` when cancelled in flight)."""
+        plan, cfg = self.plan, self.plan.config
+        urls = await self._vehicle_urls(stack)
+        events.emit(
+            "mission_start",
+            0.0,
+            name=cfg.name,
+            vehicles=plan.count,
+            urls=urls,
+            bus=self.broker_url or "in-process",
+        )
+        self.links = await stack.enter_async_context(
+            open_links(plan, urls, range(plan.count), self.builtin)
+        )
+        bring = bring_up(plan)
+        async with asyncio.TaskGroup() as tg:
+            for link in self.links.values():
+                tg.create_task(
+                    prepare_vehicle(link, bring, events), name=f"prepare-{link.vehicle_id}"
+                )
+        broker = InProcessBroker() if self.broker_url is None else None
+
+        async def client(name: str, will: Will | None = None) -> Bus:
+            bus = await stack.enter_async_context(
+                open_bus(self.broker_url, client_id=name, will=will, broker=broker)
+            )
+            self.buses.append(bus)
+            return bus
+
+        ground = ground_station(
+            plan,
+            await client("ground"),
+            events,
+            builtin=self.builtin,
+            replay=self._replay,
+            on_snapshot=self._on_snapshot,
+        )
+        agents = []
+        for i, link in self.links.items():
+            name = f"agent-{i}"
+            will = Will(topics.link(i), LinkState(sender=name, t_s=0.0, online=False, vehicle=i))
+            bus = await client(name, will)
+            agents.append(vehicle_agent(plan, i, link, bus, events, self.builtin))
+        self.agents = agents
+        tlogs = {
+            i: stack.enter_context(tlog_writer(self.out_dir, i, self._clock)) for i in self.links
+        }
+        self.ground = ground
+        try:
+            async with asyncio.TaskGroup() as tg:
+                helpers = [tg.create_task(a.run(), name=a.name) for a in agents]
+                helpers += [
+                    tg.create_task(record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
+                    for i, link in self.links.items()
+                ]
+                await ground.run()
+                # the end: hold every vehicle while its agent still streams setpoints, so
+                # no autopilot sees offboard setpoints stop before it is told to hold
+                for agent in agents:
+                    agent.stand_down()
+                await hold_all(self.links, events, ground.state.mission_t_s)
+                for task in helpers:
+                    task.cancel()
+        except asyncio.CancelledError:
+            self.interrupted = True
+            events.emit("interrupted", ground.state.mission_t_s)
+            raise
