@@ -1,6 +1,6 @@
 """One simulated ArduPlane: its heartbeat, flight modes, GUIDED slew commands and GCS failsafe.
 
-The ArduPlane personality of ``sitl.vehicle.SimVehicle`` (select it with
+The ArduPlane personality over one ``sitl.vehicle.SimVehicle`` airframe (select it with
 ``SimConfig(autopilot="arduplane")``). What it answers was read off ArduPilot's source
 (docs/simulator.md lists the files): mode numbers of ArduPlane/mode.h; HEARTBEAT of
 GCS_MAVLink_Plane.cpp (``base_mode``, ``custom_mode`` = the mode number); DO_SET_MODE of
@@ -17,25 +17,24 @@ import math
 from dataclasses import dataclass, replace
 from typing import Final
 
-from pymavlink.dialects.v20 import common as mavlink
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.camera import TrackingCamera
 from sitl.config import SimConfig, VehicleConfig
-from sitl.fixedwing import FixedWingState, step, wrap_pi
-from sitl.geodesy import Geodesy
+from sitl.fixedwing import wrap_pi
 from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
-from sitl.vehicle import AUTOPILOT_COMPONENT, FlightMode, Outgoing, SimVehicle, param_id_text
+from sitl.vehicle import (
+    ARM_DISARM_FORCE,
+    AUTOPILOT_COMPONENT,
+    FlightMode,
+    Outgoing,
+    SilenceTimer,
+    SimVehicle,
+    as_int,
+    param_id_text,
+)
 
 log = logging.getLogger(__name__)
-
-# ardupilotmega dialect commands (not in pymavlink's common dialect)
-MAV_CMD_GUIDED_CHANGE_SPEED: Final = 43000
-MAV_CMD_GUIDED_CHANGE_ALTITUDE: Final = 43001
-MAV_CMD_GUIDED_CHANGE_HEADING: Final = 43002
-HEADING_TYPE_COURSE_OVER_GROUND: Final = 0
-HEADING_TYPE_HEADING: Final = 1
-HEADING_TYPE_DEFAULT: Final = 2
-SPEED_TYPE_AIRSPEED: Final = 0
 
 #: GUIDED_CHANGE_HEADING's param3 below this is taken as this (m/s^2): ``MAX(param3, 0.05f)``
 MIN_LATERAL_ACCEL_M_S2: Final = 0.05
@@ -111,34 +110,49 @@ class ArduPlaneMode:
         return self.number
 
 
-MANUAL: Final = ArduPlaneMode("manual", 0)
-CIRCLE: Final = ArduPlaneMode("circle", 1)
-AUTO: Final = ArduPlaneMode("auto", 10)
-RTL: Final = ArduPlaneMode("rtl", 11)
-LOITER: Final = ArduPlaneMode("loiter", 12)
-TAKEOFF: Final = ArduPlaneMode("takeoff", 13)
-GUIDED: Final = ArduPlaneMode("guided", 15)
+def _plane_mode(number: int) -> ArduPlaneMode:
+    """The mode with this number, named as pymavlink's ArduPlane mode mapping names it."""
+    return ArduPlaneMode(mavutil.mode_mapping_apm[number].lower(), number)
+
+
+MANUAL: Final = _plane_mode(mavlink.PLANE_MODE_MANUAL)
+CIRCLE: Final = _plane_mode(mavlink.PLANE_MODE_CIRCLE)
+AUTO: Final = _plane_mode(mavlink.PLANE_MODE_AUTO)
+RTL: Final = _plane_mode(mavlink.PLANE_MODE_RTL)
+LOITER: Final = _plane_mode(mavlink.PLANE_MODE_LOITER)
+TAKEOFF: Final = _plane_mode(mavlink.PLANE_MODE_TAKEOFF)
+GUIDED: Final = _plane_mode(mavlink.PLANE_MODE_GUIDED)
 _NAMED: Final = {m.number: m for m in (MANUAL, CIRCLE, AUTO, RTL, LOITER, TAKEOFF, GUIDED)}
 #: fixed-wing modes of ArduPlane/mode.h that are not named above (entered, flown straight on)
-_OTHER_MODES: Final = {
-    2: "stabilize",
-    3: "training",
-    4: "acro",
-    5: "fbwa",
-    6: "fbwb",
-    7: "cruise",
-    8: "autotune",
-    14: "avoid_adsb",
-    24: "thermal",
-}
+_OTHER_MODES: Final = frozenset(
+    {
+        mavlink.PLANE_MODE_STABILIZE,
+        mavlink.PLANE_MODE_TRAINING,
+        mavlink.PLANE_MODE_ACRO,
+        mavlink.PLANE_MODE_FLY_BY_WIRE_A,
+        mavlink.PLANE_MODE_FLY_BY_WIRE_B,
+        mavlink.PLANE_MODE_CRUISE,
+        mavlink.PLANE_MODE_AUTOTUNE,
+        mavlink.PLANE_MODE_AVOID_ADSB,
+        mavlink.PLANE_MODE_THERMAL,
+    }
+)
 #: QuadPlane modes (refused: this is not a QuadPlane) and numbers ArduPlane has not
 #: (9, 16 = INITIALISING, > 25) are refused with MAV_RESULT_FAILED
 _LOITERING: Final = (CIRCLE, AUTO, LOITER)
-_GUIDED_LIKE: Final = {GUIDED.number, 14}  # Mode::is_guided_mode(): GUIDED, AVOID_ADSB
+#: Mode::is_guided_mode(): GUIDED, AVOID_ADSB
+_GUIDED_LIKE: Final = {GUIDED.number, mavlink.PLANE_MODE_AVOID_ADSB}
 #: modes in which failsafe_long_on_event does what FS_LONG_ACTN says only if it is not 0
 #: (continue): AUTO, AVOID_ADSB, GUIDED; every other fixed-wing mode but RTL returns on 0 too
-_FAILSAFE_AUTO_MODES: Final = {AUTO.number, 14, GUIDED.number}
-_FBWA: Final = 5
+_FAILSAFE_AUTO_MODES: Final = {AUTO.number, mavlink.PLANE_MODE_AVOID_ADSB, GUIDED.number}
+#: modes whose HEARTBEAT base_mode is "stabilize" (GCS_MAVLINK_Plane::base_mode)
+_STABILIZE_MODES: Final = (
+    mavlink.PLANE_MODE_STABILIZE,
+    mavlink.PLANE_MODE_FLY_BY_WIRE_A,
+    mavlink.PLANE_MODE_FLY_BY_WIRE_B,
+    mavlink.PLANE_MODE_CRUISE,
+    mavlink.PLANE_MODE_AUTOTUNE,
+)
 
 _ALT_FRAMES_RELATIVE: Final = {
     mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
@@ -174,7 +188,7 @@ def long_failsafe_mode(mode_number: int, action: int) -> int | None:
     if mode_number == RTL.number:
         return AUTO.number if action == FS_ACTION_LONG_AUTO else None
     if action == FS_ACTION_LONG_GLIDE:
-        return _FBWA
+        return int(mavlink.PLANE_MODE_FLY_BY_WIRE_A)
     if action == FS_ACTION_LONG_AUTO:
         return AUTO.number
     if mode_number in _FAILSAFE_AUTO_MODES and action == FS_ACTION_LONG_CONTINUE:
@@ -196,8 +210,7 @@ def mode_by_number(number: int) -> ArduPlaneMode | None:
     """The fixed-wing ArduPlane mode with this number, None for QuadPlane or unknown ones."""
     if number in _NAMED:
         return _NAMED[number]
-    name = _OTHER_MODES.get(number)
-    return None if name is None else ArduPlaneMode(name, number)
+    return _plane_mode(number) if number in _OTHER_MODES else None
 
 
 def heading_for_ground_course(
@@ -217,8 +230,8 @@ def heading_for_ground_course(
     return wrap_pi(course_rad + math.asin(ratio))
 
 
-class ArduPlaneVehicle(SimVehicle):
-    """A simulated ArduPlane (plain fixed wing, no QuadPlane) behind one MAVLink system id.
+class ArduPlaneAutopilot:
+    """ArduPlane (plain fixed wing, no QuadPlane) behind one simulated airframe.
 
     It boots in MANUAL on the ground. Arming does not launch it (a real one needs throttle);
     entering TAKEOFF while armed (or arming in TAKEOFF) launches it, as a catapult would, and it
@@ -229,27 +242,17 @@ class ArduPlaneVehicle(SimVehicle):
     live by the failsafe and GUIDED_CHANGE_SPEED.
     """
 
-    def __init__(
-        self,
-        index: int,
-        config: VehicleConfig,
-        sim: SimConfig,
-        camera: TrackingCamera,
-        geodesy: Geodesy,
-    ) -> None:
-        super().__init__(index, config, sim, camera, geodesy)
-        self.mode = MANUAL
-        self.command = None
-        self._air_altitude_m = self.config.altitude_m
+    def __init__(self, config: VehicleConfig, sim: SimConfig) -> None:
+        self._origin_alt_m = sim.origin_alt_m
         self._reset_guided()
-        failsafe = self._sim.gcs_failsafe
-        new_names = self._sim.gcs_sysid_param == PARAM_MAV_GCS_SYSID
+        failsafe = sim.gcs_failsafe
+        new_names = sim.gcs_sysid_param == PARAM_MAV_GCS_SYSID
         #: the parameters served and their MAV_PARAM_TYPE (ArduPilot 4.7 names or the older ones)
         self.param_types: dict[str, int] = dict(PARAM_TYPES_4_7 if new_names else PARAM_TYPES)
         gcs_ids: dict[str, float] = (
-            {PARAM_MAV_GCS_SYSID: float(self._sim.gcs_system_id), PARAM_MAV_GCS_SYSID_HI: 0.0}
+            {PARAM_MAV_GCS_SYSID: float(sim.gcs_system_id), PARAM_MAV_GCS_SYSID_HI: 0.0}
             if new_names
-            else {PARAM_SYSID_MYGCS: float(self._sim.gcs_system_id)}
+            else {PARAM_SYSID_MYGCS: float(sim.gcs_system_id)}
         )
         self.params: dict[str, float] = {
             **gcs_ids,
@@ -257,17 +260,16 @@ class ArduPlaneVehicle(SimVehicle):
             PARAM_FS_LONG_ACTN: float(
                 FS_ACTION_LONG_RTL if failsafe == "return" else FS_ACTION_LONG_CONTINUE
             ),
-            PARAM_FS_LONG_TIMEOUT: self._sim.gcs_failsafe_timeout_s,
+            PARAM_FS_LONG_TIMEOUT: sim.gcs_failsafe_timeout_s,
             # whole m/s (AP_Int16) within the vehicle's own speed range
-            PARAM_AIRSPEED_MIN: float(math.ceil(self.config.limits.min_speed_m_s)),
-            PARAM_AIRSPEED_MAX: float(math.floor(self.config.limits.max_speed_m_s)),
+            PARAM_AIRSPEED_MIN: float(math.ceil(config.limits.min_speed_m_s)),
+            PARAM_AIRSPEED_MAX: float(math.floor(config.limits.max_speed_m_s)),
         }
         #: parameters whose PARAM_SET is refused as ArduPilot refuses one it may not take over
         #: MAVLink (``allow_set_via_mavlink`` false): "Param write denied" and the old value
         self.param_write_denied: frozenset[str] = frozenset()
         self.gcs_failsafe_active = False
-        self._gcs_seen_t_s: float | None = None
-        self._gcs_seen_wall_s = -math.inf
+        self._gcs_heard = SilenceTimer()
         #: modes the GCS may not enter (FLTMODE_GCSBLOCK); a test sets it to refuse a mode
         self.gcs_blocked_modes: frozenset[int] = frozenset()
 
@@ -283,8 +285,8 @@ class ArduPlaneVehicle(SimVehicle):
     # ---- state -------------------------------------------------------------------------------
 
     @property
-    def altitude_m(self) -> float:
-        return self._air_altitude_m if self.in_air else 0.0
+    def boot_mode(self) -> FlightMode:
+        return MANUAL
 
     @property
     def guided_targets(self) -> tuple[float | None, float | None, float | None]:
@@ -293,79 +295,69 @@ class ArduPlaneVehicle(SimVehicle):
 
     # ---- modes -------------------------------------------------------------------------------
 
-    def _set_mode(self, mode: FlightMode, t_s: float) -> None:
+    def _set_mode(self, v: SimVehicle, mode: FlightMode, t_s: float) -> None:
         assert isinstance(mode, ArduPlaneMode), mode
-        if mode != self.mode:
+        if mode != v.mode:
             self._reset_guided()
-        self.mode = mode
-        self._mode_entered_t_s = t_s
-        self.command = self._mode_command(mode)
+        v.mode = mode
+        v.command = self._mode_command(v, mode)
 
-    def _mode_command(self, mode: ArduPlaneMode) -> LoiterCommand | VelocityCommand | None:
-        if not self.in_air:
+    def _mode_command(
+        self, v: SimVehicle, mode: ArduPlaneMode
+    ) -> LoiterCommand | VelocityCommand | None:
+        if not v.in_air:
             return None
         if mode in _LOITERING or mode == GUIDED:
-            return self._hold_here()  # GUIDED: set_guided_WP(current location)
+            return v.hold_here()  # GUIDED: set_guided_WP(current location)
         if mode == RTL:
-            return LoiterCommand(
-                self.home_east_m,
-                self.home_north_m,
-                self.loiter_radius_m,
-                self.config.loiter_clockwise,
-                self.cruise_speed_m_s,
-            )
+            return v.loiter_at(v.home_east_m, v.home_north_m)
         if mode == TAKEOFF:
-            course = self.state.course_rad
-            return LoiterCommand(
-                self.home_east_m + TAKEOFF_LOITER_DISTANCE_M * math.sin(course),
-                self.home_north_m + TAKEOFF_LOITER_DISTANCE_M * math.cos(course),
-                self.loiter_radius_m,
-                self.config.loiter_clockwise,
-                self.cruise_speed_m_s,
+            course = v.state.course_rad
+            return v.loiter_at(
+                v.home_east_m + TAKEOFF_LOITER_DISTANCE_M * math.sin(course),
+                v.home_north_m + TAKEOFF_LOITER_DISTANCE_M * math.cos(course),
             )
-        return VelocityCommand(self.state.course_rad, self.cruise_speed_m_s)  # straight on
+        return VelocityCommand(v.state.course_rad, v.cruise_speed_m_s)  # straight on
 
-    def _change_mode(self, number: int, t_s: float) -> tuple[int, list[Outgoing]]:
+    def _change_mode(self, v: SimVehicle, number: int, t_s: float) -> tuple[int, list[Outgoing]]:
         """Plane::set_mode for a GCS request: MAV_RESULT_FAILED when it cannot be entered."""
         mode = mode_by_number(number)
         if mode is None:
             return mavlink.MAV_RESULT_FAILED, []
-        if number in self.gcs_blocked_modes and mode != self.mode:
+        if number in self.gcs_blocked_modes and mode != v.mode:
             text = (
                 f"Mode change to {mode.name.upper()} denied, GCS entry disabled (FLTMODE_GCSBLOCK)"
             )
-            return mavlink.MAV_RESULT_FAILED, [self._statustext(mavlink.MAV_SEVERITY_NOTICE, text)]
-        changed = mode != self.mode
+            return mavlink.MAV_RESULT_FAILED, [v.statustext(mavlink.MAV_SEVERITY_NOTICE, text)]
+        changed = mode != v.mode
         if changed:
-            self._set_mode(mode, t_s)
-        if mode == TAKEOFF and self.armed and not self.in_air:
-            self._launch(t_s)
-        return mavlink.MAV_RESULT_ACCEPTED, [self._heartbeat()] if changed else []
+            self._set_mode(v, mode, t_s)
+        if mode == TAKEOFF and v.armed and not v.in_air:
+            v.launch(t_s)
+        return mavlink.MAV_RESULT_ACCEPTED, [v.heartbeat()] if changed else []
 
-    def arm(self, t_s: float) -> None:
+    def arm(self, v: SimVehicle, t_s: float) -> None:
         """Arm; only TAKEOFF mode launches (in MANUAL the throttle is the pilot's)."""
-        if self.armed:
+        if v.armed:
             return
-        self.armed = True
-        if self.mode == TAKEOFF:
-            self._launch(t_s)
+        v.armed = True
+        if v.mode == TAKEOFF:
+            v.launch(t_s)
 
-    def _launch(self, t_s: float) -> None:
-        self._air_altitude_m = self.config.altitude_m
-        start = self.config.start
-        self.state = FixedWingState(
-            self.state.east_m, self.state.north_m, start.course_rad, start.speed_m_s
-        )
-        self.in_air = True
-        assert isinstance(self.mode, ArduPlaneMode), self.mode
-        self.command = self._mode_command(self.mode)
+    def launched(self, v: SimVehicle, t_s: float) -> None:
+        """Launched (in TAKEOFF): fly the current mode from there."""
+        assert isinstance(v.mode, ArduPlaneMode), v.mode
+        v.command = self._mode_command(v, v.mode)
 
     # ---- incoming ----------------------------------------------------------------------------
 
-    def handle(self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float) -> list[Outgoing]:
+    def handle(
+        self, v: SimVehicle, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
+    ) -> list[Outgoing]:
+        """The GCS's heartbeats and the parameter protocol; offboard setpoints are ignored."""
         msg_id = msg.get_msgId()
         if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
-            return self._on_gcs_heartbeat(msg, t_s, wall_s)
+            return self._on_gcs_heartbeat(v, msg, t_s, wall_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED:
             return []  # no offboard setpoints (only LOCAL_OFFSET_NED altitude in GUIDED)
         if msg_id in (
@@ -375,12 +367,12 @@ class ArduPlaneVehicle(SimVehicle):
         ):
             if msg.target_component not in (0, AUTOPILOT_COMPONENT):
                 return []
-            return self._on_param_message(msg)
-        return super().handle(msg, t_s, wall_s)
+            return self._on_param_message(v, msg)
+        return []
 
     # ---- parameters (GCS_Param.cpp) ----------------------------------------------------------
 
-    def _on_param_message(self, msg: mavlink.MAVLink_message) -> list[Outgoing]:
+    def _on_param_message(self, v: SimVehicle, msg: mavlink.MAVLink_message) -> list[Outgoing]:
         """PARAM_REQUEST_LIST: every parameter; PARAM_REQUEST_READ: by index, or by name when the
         index is -1 (answered with index -1); PARAM_SET: the value stored as its type, confirmed
         with PARAM_VALUE. Unknown names, bad indices and non-finite values get no answer."""
@@ -388,15 +380,15 @@ class ArduPlaneVehicle(SimVehicle):
         types = self.param_types
         names = list(types)
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
-            return [self._param_value_message(name, names.index(name)) for name in names]
+            return [self._param_value_message(v, name, names.index(name)) for name in names]
         if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
             index = msg.param_index
             if index != -1:
                 known = 0 <= index < len(names)
-                return [self._param_value_message(names[index], index)] if known else []
+                return [self._param_value_message(v, names[index], index)] if known else []
             name = param_id_text(msg.param_id)
             known = name in types
-            return [self._param_value_message(name, PARAM_INDEX_NONE)] if known else []
+            return [self._param_value_message(v, name, PARAM_INDEX_NONE)] if known else []
         name = param_id_text(msg.param_id)
         value = float(msg.param_value)
         if name not in types or not math.isfinite(value):
@@ -404,14 +396,14 @@ class ArduPlaneVehicle(SimVehicle):
         if name in self.param_write_denied:
             text = f"Param write denied ({name})"
             return [
-                self._statustext(mavlink.MAV_SEVERITY_WARNING, text),
-                self._param_value_message(name, PARAM_INDEX_NONE),  # the value in force
+                v.statustext(mavlink.MAV_SEVERITY_WARNING, text),
+                self._param_value_message(v, name, PARAM_INDEX_NONE),  # the value in force
             ]
         self.params[name] = param_value_from_wire(types[name], value)
-        log.info("vehicle %d: %s set to %g", self.system_id, name, self.params[name])
-        return [self._param_value_message(name, PARAM_INDEX_NONE)]
+        log.info("vehicle %d: %s set to %g", v.system_id, name, self.params[name])
+        return [self._param_value_message(v, name, PARAM_INDEX_NONE)]
 
-    def _param_value_message(self, name: str, index: int) -> Outgoing:
+    def _param_value_message(self, v: SimVehicle, name: str, index: int) -> Outgoing:
         return AUTOPILOT_COMPONENT, mavlink.MAVLink_param_value_message(
             name.encode("ascii"),
             self.params[name],
@@ -435,87 +427,88 @@ class ArduPlaneVehicle(SimVehicle):
         return low <= system_id <= high
 
     def _on_gcs_heartbeat(
-        self, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
+        self, v: SimVehicle, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
     ) -> list[Outgoing]:
         """Only the GCS of SYSID_MYGCS counts (GCS_MAVLINK::handle_heartbeat)."""
         if not self.is_gcs(msg.get_srcSystem()):
             return []
-        self._gcs_seen_t_s, self._gcs_seen_wall_s = t_s, wall_s
+        self._gcs_heard.heard(t_s, wall_s)
         if not self.gcs_failsafe_active:
             return []
         self.gcs_failsafe_active = False  # the mode is not changed back (failsafe_long_off_event)
         text = f"Failsafe. Long event off: reason={MODE_REASON_GCS_FAILSAFE}"
-        log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
-        return [self._statustext(mavlink.MAV_SEVERITY_WARNING, text)]
+        log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
+        return [v.statustext(mavlink.MAV_SEVERITY_WARNING, text)]
 
-    def _run_command(
-        self, command: int, p: tuple[float, ...], t_s: float, wall_s: float, frame: int | None
+    def run_command(
+        self,
+        v: SimVehicle,
+        command: int,
+        p: tuple[float, ...],
+        t_s: float,
+        wall_s: float,
+        frame: int | None,
     ) -> tuple[int, list[Outgoing]]:
         failed, accepted = mavlink.MAV_RESULT_FAILED, mavlink.MAV_RESULT_ACCEPTED
         if command in (
-            MAV_CMD_GUIDED_CHANGE_HEADING,
-            MAV_CMD_GUIDED_CHANGE_SPEED,
-            MAV_CMD_GUIDED_CHANGE_ALTITUDE,
+            mavlink.MAV_CMD_GUIDED_CHANGE_HEADING,
+            mavlink.MAV_CMD_GUIDED_CHANGE_SPEED,
+            mavlink.MAV_CMD_GUIDED_CHANGE_ALTITUDE,
         ):
             if frame is None:  # handled in handle_command_int_packet only (see docs)
                 return mavlink.MAV_RESULT_UNSUPPORTED, []
-            return self._guided_slew(command, p, frame), []
+            return self._guided_slew(v, command, p, frame), []
         if command == mavlink.MAV_CMD_DO_SET_MODE:
-            if not _as_int(p[0]) & _CUSTOM:
+            if not as_int(p[0]) & _CUSTOM:
                 return mavlink.MAV_RESULT_DENIED, []
-            return self._change_mode(_as_int(p[1], -1), t_s)
+            return self._change_mode(v, as_int(p[1], -1), t_s)
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] >= 0.5:
-                was = self.armed
-                self.arm(t_s)
-                return accepted, [self._heartbeat()] if not was else []
-            if self.in_air and _as_int(p[1]) != 21196:
+                was = v.armed
+                self.arm(v, t_s)
+                return accepted, [v.heartbeat()] if not was else []
+            if v.in_air and as_int(p[1]) != ARM_DISARM_FORCE:
                 return failed, []  # disarming in flight needs the force value
-            return super()._run_command(command, p, t_s, wall_s, frame)
+            was = v.armed
+            v.disarm()
+            return accepted, [v.heartbeat()] if was else []
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             return failed, []  # handle_command_MAV_CMD_NAV_TAKEOFF: only a QuadPlane takes off so
         if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            return self._change_mode(RTL.number, t_s)
+            return self._change_mode(v, RTL.number, t_s)
         if command == mavlink.MAV_CMD_NAV_LOITER_UNLIM:
-            return self._change_mode(LOITER.number, t_s)
+            return self._change_mode(v, LOITER.number, t_s)
         if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
-            if self.mode.custom_mode not in _GUIDED_LIKE | {AUTO.number}:
+            if v.mode.custom_mode not in _GUIDED_LIKE | {AUTO.number}:
                 return failed, []
             if not (math.isfinite(p[1]) and p[1] > 0.0):
                 return failed, []
-            self._guided_speed_m_s = self.config.limits.clamp_speed(p[1])
+            self._guided_speed_m_s = v.config.limits.clamp_speed(p[1])
             return accepted, []
         if command == mavlink.MAV_CMD_DO_REPOSITION:
-            return self._reposition_guided(p, t_s)
-        if command in (
-            mavlink.MAV_CMD_REQUEST_MESSAGE,
-            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-            mavlink.MAV_CMD_GET_HOME_POSITION,
-            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-        ):
-            return super()._run_command(command, p, t_s, wall_s, frame)
+            return self._reposition_guided(v, p, t_s)
         return mavlink.MAV_RESULT_UNSUPPORTED, []
 
-    def _guided_slew(self, command: int, p: tuple[float, ...], frame: int) -> int:
+    def _guided_slew(self, v: SimVehicle, command: int, p: tuple[float, ...], frame: int) -> int:
         """handle_command_int_guided_slew_commands: FAILED outside GUIDED, DENIED for bad values."""
-        if self.mode != GUIDED:
+        if v.mode != GUIDED:
             return int(mavlink.MAV_RESULT_FAILED)
         denied = int(mavlink.MAV_RESULT_DENIED)
-        if command == MAV_CMD_GUIDED_CHANGE_HEADING:
-            kind, heading_deg, accel = _as_int(p[0], -1), p[1], p[2]
+        if command == mavlink.MAV_CMD_GUIDED_CHANGE_HEADING:
+            kind, heading_deg, accel = as_int(p[0], -1), p[1], p[2]
             if not (math.isfinite(heading_deg) and 0.0 <= heading_deg < 360.0):
                 return denied
-            if kind == HEADING_TYPE_DEFAULT:
+            if kind == mavlink.HEADING_TYPE_DEFAULT:
                 self._guided_course_rad = None
                 return int(mavlink.MAV_RESULT_ACCEPTED)
-            if kind != HEADING_TYPE_COURSE_OVER_GROUND:
+            if kind != mavlink.HEADING_TYPE_COURSE_OVER_GROUND:
                 return denied  # HEADING_TYPE_HEADING is ArduPlane's too, not imitated here
             self._guided_course_rad = wrap_pi(math.radians(heading_deg))
             accel = accel if math.isfinite(accel) else 0.0
             self._guided_lateral_accel_m_s2 = max(accel, MIN_LATERAL_ACCEL_M_S2)
             return int(mavlink.MAV_RESULT_ACCEPTED)
-        if command == MAV_CMD_GUIDED_CHANGE_SPEED:
-            if _as_int(p[0], -1) != SPEED_TYPE_AIRSPEED:
+        if command == mavlink.MAV_CMD_GUIDED_CHANGE_SPEED:
+            if as_int(p[0], -1) != mavlink.SPEED_TYPE_AIRSPEED:
                 return denied
             speed, accel = p[1], p[2]
             low = self.params[PARAM_AIRSPEED_MIN]
@@ -532,92 +525,92 @@ class ArduPlaneVehicle(SimVehicle):
         if frame in _ALT_FRAMES_RELATIVE:
             self._guided_altitude_m = altitude
         elif frame in _ALT_FRAMES_ABSOLUTE:
-            self._guided_altitude_m = altitude - self._sim.origin_alt_m
+            self._guided_altitude_m = altitude - self._origin_alt_m
         else:
             return denied
         rate = abs(rate) if math.isfinite(rate) else 0.0
         self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S if rate == 0.0 else rate
         return int(mavlink.MAV_RESULT_ACCEPTED)
 
-    def _reposition_guided(self, p: tuple[float, ...], t_s: float) -> tuple[int, list[Outgoing]]:
+    def _reposition_guided(
+        self, v: SimVehicle, p: tuple[float, ...], t_s: float
+    ) -> tuple[int, list[Outgoing]]:
         """DO_REPOSITION: GUIDED, loitering at the point (if asked to change mode, or in GUIDED)."""
         lat, lon = p[4], p[5]
         if not (math.isfinite(lat) and math.isfinite(lon) and -90 <= lat <= 90):
             return mavlink.MAV_RESULT_DENIED, []
-        if not (_as_int(p[1]) & 1 or self.mode == GUIDED):  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+        if not (as_int(p[1]) & mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE or v.mode == GUIDED):
             return mavlink.MAV_RESULT_FAILED, []
-        result, out = self._change_mode(GUIDED.number, t_s)
-        if result != mavlink.MAV_RESULT_ACCEPTED or not self.in_air:
+        result, out = self._change_mode(v, GUIDED.number, t_s)
+        if result != mavlink.MAV_RESULT_ACCEPTED or not v.in_air:
             return result, out
         self._guided_course_rad = None
-        east, north, _ = self._geodesy.to_local(lat, lon, self._sim.origin_alt_m)
-        self.command = LoiterCommand(
-            east, north, self.loiter_radius_m, self.config.loiter_clockwise, self.cruise_speed_m_s
-        )
+        east, north = v.local_of(lat, lon)
+        v.command = v.loiter_at(east, north)
         return result, out
 
     # ---- flight ------------------------------------------------------------------------------
 
-    def _gcs_failsafe_armed(self) -> bool:
+    def _gcs_failsafe_armed(self, v: SimVehicle) -> bool:
         """check_long_failsafe: FS_GCS_ENABL 1 or 2 in any mode, 3 only in AUTO (REMRSSI, the
         other half of 2, is not imitated: there is no radio)."""
         enabled = self._param_int(PARAM_FS_GCS_ENABL)
         if enabled in (GCS_FAILSAFE_HEARTBEAT, GCS_FAILSAFE_HB_RSSI):
             return True
-        return enabled == GCS_FAILSAFE_HB_AUTO and self.mode == AUTO
+        return enabled == GCS_FAILSAFE_HB_AUTO and v.mode == AUTO
 
-    def _mode_events(self, t_s: float, wall_s: float) -> list[Outgoing]:
+    def mode_events(self, v: SimVehicle, t_s: float, wall_s: float) -> list[Outgoing]:
         """The GCS failsafe (check_long_failsafe / failsafe_long_on_event)."""
-        seen = self._gcs_seen_t_s
+        heard = self._gcs_heard
         if (
             self.gcs_failsafe_active
-            or seen is None  # "gcs_last_seen_ms != 0": never before a first heartbeat
-            or not self._gcs_failsafe_armed()
-            or t_s - seen <= self.params[PARAM_FS_LONG_TIMEOUT]
-            or wall_s - self._gcs_seen_wall_s <= GCS_FAILSAFE_MIN_WALL_S
+            or not heard.ever  # "gcs_last_seen_ms != 0": never before a first heartbeat
+            or not self._gcs_failsafe_armed(v)
+            or not heard.silent(
+                t_s, wall_s, self.params[PARAM_FS_LONG_TIMEOUT], GCS_FAILSAFE_MIN_WALL_S
+            )
         ):
             return []
         self.gcs_failsafe_active = True
         text = f"Failsafe. Long event on: type={FAILSAFE_GCS}/reason={MODE_REASON_GCS_FAILSAFE}"
-        log.info("vehicle %d: %s at t=%.2f s", self.system_id, text, t_s)
-        out = [self._statustext(mavlink.MAV_SEVERITY_WARNING, text)]
-        target = long_failsafe_mode(self.mode.custom_mode, self._param_int(PARAM_FS_LONG_ACTN))
+        log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
+        out = [v.statustext(mavlink.MAV_SEVERITY_WARNING, text)]
+        target = long_failsafe_mode(v.mode.custom_mode, self._param_int(PARAM_FS_LONG_ACTN))
         mode = None if target is None else mode_by_number(target)
-        if mode is not None and mode != self.mode:
-            self._set_mode(mode, t_s)
-        out.append(self._heartbeat())  # system status CRITICAL, and the mode
-        self._next_due[mavlink.MAVLINK_MSG_ID_HEARTBEAT] = t_s + 1.0
+        if mode is not None and mode != v.mode:
+            self._set_mode(v, mode, t_s)
+        out.append(v.heartbeat())  # system status CRITICAL, and the mode
+        v.next_heartbeat_at(t_s + 1.0)
         return out
 
-    def _fly(self, dt_s: float) -> None:
-        limits = self.config.limits
-        command = self.command or self._hold_here()
-        if self.mode == GUIDED:
-            command = self._guided_command(command)
-        course, speed = guide(self.state, command, limits.course_gain_per_s)
+    def fly(self, v: SimVehicle, dt_s: float) -> None:
+        """One physics step: GUIDED flies the guided targets (course over ground in the wind)."""
+        limits = v.config.limits
+        command = v.command or v.hold_here()
+        if v.mode == GUIDED:
+            command = self._guided_command(v, command)
+        course, speed = guide(v.state, command, limits.course_gain_per_s)
         if isinstance(command, CourseCommand):
             course = heading_for_ground_course(
-                course, self.state.speed_m_s, self.wind_east_m_s, self.wind_north_m_s
+                course, v.state.speed_m_s, v.wind_east_m_s, v.wind_north_m_s
             )
-            speed_now = max(self.state.speed_m_s, limits.min_speed_m_s)
+            speed_now = max(v.state.speed_m_s, limits.min_speed_m_s)
             rate = min(limits.max_course_rate_rad_s, command.max_lateral_accel_m_s2 / speed_now)
             limits = replace(limits, max_course_rate_rad_s=rate)
-        if self.mode == GUIDED and self._guided_speed_m_s is not None:
+        if v.mode == GUIDED and self._guided_speed_m_s is not None:
             limits = replace(
                 limits, max_accel_m_s2=min(limits.max_accel_m_s2, self._guided_accel_m_s2)
             )
-        self.state = step(
-            self.state, course, speed, limits, dt_s, self.wind_east_m_s, self.wind_north_m_s
-        )
-        target = self._guided_altitude_m if self.mode == GUIDED else None
+        v.step(course, speed, limits, dt_s)
+        target = self._guided_altitude_m if v.mode == GUIDED else None
         if target is not None:
             climb = min(self._guided_climb_rate_m_s, MAX_CLIMB_RATE_M_S) * dt_s
-            error = target - self._air_altitude_m
-            self._air_altitude_m += max(-climb, min(climb, error))
+            error = target - v.air_altitude_m
+            v.air_altitude_m += max(-climb, min(climb, error))
 
-    def _guided_command(self, command: Command) -> Command:
+    def _guided_command(self, v: SimVehicle, command: Command) -> Command:
         """GUIDED: the commanded course, else the loiter it entered with, at the guided speed."""
-        speed = self._guided_speed_m_s or self.cruise_speed_m_s
+        speed = self._guided_speed_m_s or v.cruise_speed_m_s
         if self._guided_course_rad is not None:
             return CourseCommand(self._guided_course_rad, speed, self._guided_lateral_accel_m_s2)
         if isinstance(command, LoiterCommand):
@@ -626,14 +619,14 @@ class ArduPlaneVehicle(SimVehicle):
 
     # ---- outgoing ----------------------------------------------------------------------------
 
-    def _heartbeat_message(self) -> mavlink.MAVLink_message:
-        assert isinstance(self.mode, ArduPlaneMode), self.mode
-        return heartbeat(self.mode, self.armed, self.in_air, self.gcs_failsafe_active)
+    def heartbeat(self, v: SimVehicle) -> mavlink.MAVLink_message:
+        assert isinstance(v.mode, ArduPlaneMode), v.mode
+        return heartbeat(v.mode, v.armed, v.in_air, self.gcs_failsafe_active)
 
-    def _autopilot_version(self) -> Outgoing:
-        return AUTOPILOT_COMPONENT, mavlink.MAVLink_autopilot_version_message(
+    def autopilot_version(self, v: SimVehicle) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_autopilot_version_message(
             ARDUPILOT_CAPABILITIES, ARDUPLANE_VERSION, 0, 0, 0,
-            [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x4150_0000_0000_0000 + self.system_id,
+            [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x4150_0000_0000_0000 + v.system_id,
         )  # fmt: skip
 
 
@@ -644,9 +637,9 @@ def heartbeat(
     it (with the default stick mixing), custom_mode = the mode number, CRITICAL in failsafe."""
     if mode == MANUAL:
         base = _MANUAL_INPUT
-    elif mode.number in (2, 5, 6, 7, 8):  # STABILIZE, FBWA, FBWB, CRUISE, AUTOTUNE
+    elif mode.number in _STABILIZE_MODES:
         base = _STABILIZE
-    elif mode.number in (3, 4):  # TRAINING, ACRO
+    elif mode.number in (mavlink.PLANE_MODE_TRAINING, mavlink.PLANE_MODE_ACRO):
         base = _MANUAL_INPUT
     else:  # AUTO, RTL, LOITER, THERMAL, AVOID_ADSB, GUIDED, CIRCLE, TAKEOFF
         base = _GUIDED_FLAG | _STABILIZE
@@ -665,7 +658,3 @@ def heartbeat(
         status,
         3,
     )
-
-
-def _as_int(value: float, default: int = 0) -> int:
-    return round(value) if math.isfinite(value) else default

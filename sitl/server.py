@@ -27,12 +27,20 @@ from typing import Self
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.arduplane import ArduPlaneVehicle
+from sitl.arduplane import ArduPlaneAutopilot
 from sitl.camera import Observation, TrackingCamera
-from sitl.config import SimConfig, WindConfig
+from sitl.config import SimConfig, VehicleConfig, WindConfig
 from sitl.geodesy import AnchoredGeodesy, Geodesy
+from sitl.px4 import Px4Autopilot
 from sitl.target import TargetState
-from sitl.vehicle import AUTOPILOT_COMPONENT, CAMERA_COMPONENT, Outgoing, SimVehicle, VehicleTruth
+from sitl.vehicle import (
+    AUTOPILOT_COMPONENT,
+    CAMERA_COMPONENT,
+    Autopilot,
+    Outgoing,
+    SimVehicle,
+    VehicleTruth,
+)
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +53,13 @@ MAX_CATCH_UP_WALL_S = 0.25
 MIN_SLEEP_WALL_S = 0.001
 OBSERVATION_LOG_LENGTH = 10_000
 RECEIVE_BUFFER_BYTES = 1 << 20
+
+
+def autopilot_for(vehicle: VehicleConfig, sim: SimConfig) -> Autopilot:
+    """The autopilot personality ``sim.autopilot`` names, for one vehicle."""
+    if sim.autopilot == "arduplane":
+        return ArduPlaneAutopilot(vehicle, sim)
+    return Px4Autopilot(sim)
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,14 +160,14 @@ class SimulatorServer:
         self._geodesy = Geodesy(config.origin_lat_deg, config.origin_lon_deg, config.origin_alt_m)
         seeds = np.random.SeedSequence(config.seed).spawn(len(config.vehicles) + 1)
         self._wind_rng = np.random.default_rng(seeds[0])
-        personality = ArduPlaneVehicle if config.autopilot == "arduplane" else SimVehicle
         self.vehicles = tuple(
-            personality(
+            SimVehicle(
                 i,
                 vc,
                 config,
                 TrackingCamera(config.camera, np.random.default_rng(seeds[i + 1])),
                 self._geodesy,
+                autopilot_for(vc, config),
             )
             for i, vc in enumerate(config.vehicles)
         )

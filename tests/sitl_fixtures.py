@@ -8,9 +8,12 @@ from dataclasses import dataclass, field, replace
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl.arduplane import ArduPlaneAutopilot
 from sitl.config import SimConfig, default_vehicles
 from sitl.ports import find_free_udp_base_port
+from sitl.px4 import Px4Autopilot
 from sitl.server import SimulatorServer
+from sitl.vehicle import SimVehicle
 
 GCS_SYSTEM_ID = 255
 GCS_COMPONENT_ID = 190
@@ -21,6 +24,20 @@ def sim_config(count: int, speedup: float, **overrides: object) -> SimConfig:
     base = find_free_udp_base_port(count)
     config = SimConfig(vehicles=default_vehicles(count), base_port=base, speedup=speedup)
     return replace(config, **overrides)  # type: ignore[arg-type]
+
+
+def px4_of(vehicle: SimVehicle) -> Px4Autopilot:
+    """The vehicle's PX4 personality (the test fails if it flies another)."""
+    autopilot = vehicle.autopilot
+    assert isinstance(autopilot, Px4Autopilot)
+    return autopilot
+
+
+def arduplane_of(vehicle: SimVehicle) -> ArduPlaneAutopilot:
+    """The vehicle's ArduPlane personality (the test fails if it flies another)."""
+    autopilot = vehicle.autopilot
+    assert isinstance(autopilot, ArduPlaneAutopilot)
+    return autopilot
 
 
 @contextlib.asynccontextmanager

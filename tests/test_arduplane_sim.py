@@ -10,6 +10,11 @@ from typing import Any
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
+from pymavlink.dialects.v20.ardupilotmega import (
+    MAV_CMD_GUIDED_CHANGE_ALTITUDE,
+    MAV_CMD_GUIDED_CHANGE_HEADING,
+    MAV_CMD_GUIDED_CHANGE_SPEED,
+)
 
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
@@ -17,19 +22,13 @@ from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.core.frames import wrap_pi
 from app.errors import LinkError
 from app.runtime.ports.vehicle import CourseSpeedCommand, LeftOffboard, OffboardLostError
-from sitl.arduplane import (
-    GUIDED,
-    MAV_CMD_GUIDED_CHANGE_ALTITUDE,
-    MAV_CMD_GUIDED_CHANGE_HEADING,
-    MAV_CMD_GUIDED_CHANGE_SPEED,
-    ArduPlaneVehicle,
-    heading_for_ground_course,
-    long_failsafe_mode,
-)
+from sitl.arduplane import GUIDED, heading_for_ground_course, long_failsafe_mode
 from sitl.camera import TrackingCamera
 from sitl.config import SimConfig, default_vehicles
 from sitl.geodesy import Geodesy
-from tests.sitl_fixtures import running_sim, sim_config
+from sitl.server import autopilot_for
+from sitl.vehicle import SimVehicle
+from tests.sitl_fixtures import arduplane_of, running_sim, sim_config
 from tests.test_vehicle_link_sim import fly, next_event, origin_of, urls_of
 
 SPEEDUP = 8.0
@@ -43,11 +42,12 @@ REL_ALT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
 # ---- the personality without sockets ---------------------------------------------------------
 
 
-def plane(**overrides: object) -> ArduPlaneVehicle:
+def plane(**overrides: object) -> SimVehicle:
     sim = SimConfig(vehicles=default_vehicles(1), autopilot="arduplane", **overrides)  # type: ignore[arg-type]
     camera = TrackingCamera(sim.camera, np.random.default_rng(0))
     geodesy = Geodesy(sim.origin_lat_deg, sim.origin_lon_deg, sim.origin_alt_m)
-    return ArduPlaneVehicle(0, sim.vehicles[0], sim, camera, geodesy)
+    vc = sim.vehicles[0]
+    return SimVehicle(0, vc, sim, camera, geodesy, autopilot_for(vc, sim))
 
 
 def wire(msg: mavlink.MAVLink_message, src: int = MAVSDK_GCS_ID) -> mavlink.MAVLink_message:
@@ -63,36 +63,34 @@ def ack_of(out: list[tuple[int, mavlink.MAVLink_message]], command: int) -> int:
     return int(result)
 
 
-def command_int(
-    v: ArduPlaneVehicle, command: int, *params: float, frame: int = 0, z: float = 0.0
-) -> int:
+def command_int(v: SimVehicle, command: int, *params: float, frame: int = 0, z: float = 0.0) -> int:
     p = [*params, *([0.0] * (4 - len(params)))]
     msg = mavlink.MAVLink_command_int_message(1, 1, frame, command, 0, 0, *p, 0, 0, z)
     return ack_of(v.handle(wire(msg), 0.0, 0.0), command)
 
 
-def command_long(v: ArduPlaneVehicle, command: int, *params: float) -> int:
+def command_long(v: SimVehicle, command: int, *params: float) -> int:
     p = [*params, *([0.0] * (7 - len(params)))]
     msg = mavlink.MAVLink_command_long_message(1, 1, command, 0, *p)
     return ack_of(v.handle(wire(msg), 0.0, 0.0), command)
 
 
-def heartbeat_of(v: ArduPlaneVehicle) -> mavlink.MAVLink_message:
+def heartbeat_of(v: SimVehicle) -> mavlink.MAVLink_message:
     (msg,) = [
         m for _, m in v.telemetry(1000.0, lambda: (0.0, 0.0, 0.0)) if m.get_type() == "HEARTBEAT"
     ]
     return msg
 
 
-def flying(v: ArduPlaneVehicle) -> bool:
+def flying(v: SimVehicle) -> bool:
     return v.in_air
 
 
-def targets(v: ArduPlaneVehicle) -> tuple[float | None, float | None, float | None]:
-    return v.guided_targets
+def targets(v: SimVehicle) -> tuple[float | None, float | None, float | None]:
+    return arduplane_of(v).guided_targets
 
 
-def guided_in_the_air() -> ArduPlaneVehicle:
+def guided_in_the_air() -> SimVehicle:
     v = plane()
     assert command_long(v, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == ACCEPTED
     assert not flying(v)  # armed in MANUAL: the throttle is the pilot's
@@ -197,9 +195,9 @@ def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
     v = plane(gcs_failsafe="return", gcs_system_id=255)
     v.handle(hb(MAVSDK_GCS_ID), 0.0, 0.0)  # MAVSDK's id: not the GCS this ArduPlane knows
     assert v.advance(0.02, 60.0, 60.0, 0.0, 0.0) == []
-    assert v.gcs_failsafe_active is False
+    assert arduplane_of(v).gcs_failsafe_active is False
     v = guided_in_the_air()
-    v.params["FS_GCS_ENABL"], v.params["FS_LONG_ACTN"] = 1, 0  # heartbeat; continue
+    arduplane_of(v).params.update(FS_GCS_ENABL=1, FS_LONG_ACTN=0)  # heartbeat; continue
     v.handle(hb(255), 10.0, 10.0)
     assert v.advance(0.02, 14.0, 14.0, 0.0, 0.0) == []  # FS_LONG_TIMEOUT 5 s not yet over
     out = v.advance(0.02, 15.1, 15.1, 0.0, 0.0)
@@ -209,7 +207,7 @@ def test_gcs_failsafe_counts_only_sysid_mygcs_heartbeats():
     assert heartbeat_of(v).system_status == mavlink.MAV_STATE_CRITICAL
     out = v.handle(hb(255), 16.0, 16.0)
     assert [m.text for _, m in out] == ["Failsafe. Long event off: reason=5"]
-    assert v.gcs_failsafe_active is False
+    assert arduplane_of(v).gcs_failsafe_active is False
 
 
 def param_values(
@@ -222,7 +220,7 @@ def param_values(
     ]
 
 
-def param_set(v: ArduPlaneVehicle, name: str, value: float, kind: int) -> list[tuple[int, Any]]:
+def param_set(v: SimVehicle, name: str, value: float, kind: int) -> list[tuple[int, Any]]:
     msg = mavlink.MAVLink_param_set_message(1, 1, name.encode(), value, kind)
     return v.handle(wire(msg), 0.0, 0.0)
 
@@ -260,7 +258,7 @@ def test_failsafe_parameters_are_served_as_arduplane_serves_them():
         ("FS_GCS_ENABL", 1.0, INT8, 65535)  # AP_Param::set_float adds 0.01, then truncates
     ]
     assert param_set(v, "FS_LONG_ACTN", math.nan, INT8) == []
-    v.param_write_denied = frozenset({"FS_LONG_ACTN"})
+    arduplane_of(v).param_write_denied = frozenset({"FS_LONG_ACTN"})
     out = param_set(v, "FS_LONG_ACTN", 1.0, INT8)
     assert [m.text for _, m in out if m.get_type() == "STATUSTEXT"] == [
         "Param write denied (FS_LONG_ACTN)"
@@ -296,14 +294,14 @@ def test_ardupilot_4_7_names_the_gcs_by_mav_gcs_sysid_and_a_range():
     ]
     old_name = mavlink.MAVLink_param_request_read_message(1, 1, b"SYSID_MYGCS", -1)
     assert v.handle(wire(old_name), 0.0, 0.0) == []  # no longer there: no answer
-    assert v.is_gcs(255)
-    assert not v.is_gcs(MAVSDK_GCS_ID)
+    assert arduplane_of(v).is_gcs(255)
+    assert not arduplane_of(v).is_gcs(MAVSDK_GCS_ID)
     param_set(v, "MAV_GCS_SYSID_HI", 250.0, INT16)  # below MAV_GCS_SYSID: still 255 alone
-    assert not v.is_gcs(250)
+    assert not arduplane_of(v).is_gcs(250)
     param_set(v, "MAV_GCS_SYSID", 240.0, INT16)  # 240..250: a range of ground stations
-    assert v.is_gcs(MAVSDK_GCS_ID)
-    assert v.is_gcs(240)
-    assert not v.is_gcs(251)
+    assert arduplane_of(v).is_gcs(MAVSDK_GCS_ID)
+    assert arduplane_of(v).is_gcs(240)
+    assert not arduplane_of(v).is_gcs(251)
 
 
 def test_long_failsafe_action_by_mode_follows_failsafe_long_on_event():
@@ -371,25 +369,25 @@ async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_re
     wide = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=30.0, max_course_rate_rad_s=0.2)
     async with asyncio.timeout(40.0), running_sim(config) as sim:
         vehicle = sim.vehicles[0]
-        assert isinstance(vehicle, ArduPlaneVehicle)
-        vehicle.params["AIRSPEED_MAX"] = 30.0  # so that the mission's 12-30 m/s is taken
+        autopilot = arduplane_of(vehicle)
+        autopilot.params["AIRSPEED_MAX"] = 30.0  # so that the mission's 12-30 m/s is taken
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
             hub.link(1, LinkConfig(wide)) as link,
         ):
             await link.wait_ready(10.0)
-            vehicle.params["AIRSPEED_MAX"] = 24.0  # and then narrowed behind its back
+            autopilot.params["AIRSPEED_MAX"] = 24.0  # and then narrowed behind its back
             await link.arm()
             await link.take_off(10.0)
-            vehicle.gcs_blocked_modes = frozenset({15})  # FLTMODE_GCSBLOCK: no GUIDED from a GCS
+            autopilot.gcs_blocked_modes = frozenset({15})  # FLTMODE_GCSBLOCK: no GUIDED from a GCS
             with pytest.raises(LinkError, match="mode change to GUIDED refused: MAV_RESULT_FAILED"):
                 await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
-            vehicle.gcs_blocked_modes = frozenset()
+            autopilot.gcs_blocked_modes = frozenset()
             await link.start_offboard(CourseSpeedCommand(0.0, 18.0))
             # 28 m/s is within the app's limits but above the vehicle's AIRSPEED_MAX (now 24)
             with pytest.raises(LinkError, match="GUIDED_CHANGE_SPEED refused: MAV_RESULT_FAILED"):
                 await link.send(CourseSpeedCommand(0.0, 28.0))
-            assert vehicle.guided_targets[1] == 18.0
+            assert autopilot.guided_targets[1] == 18.0
 
 
 async def test_a_mission_faster_than_the_airspeed_range_is_refused_before_take_off():
@@ -449,11 +447,11 @@ async def test_stock_arduplane_is_made_to_return_when_mavsdk_heartbeats_stop():
         aclosing(link.events()) as events,
     ):
         vehicle = sim.vehicles[0]
-        assert isinstance(vehicle, ArduPlaneVehicle)
+        autopilot = arduplane_of(vehicle)
         east = CourseSpeedCommand(math.pi / 2, 16.0)
         await link.wait_ready(10.0)  # prepare() sets the three over MAVLink
-        assert vehicle.params["SYSID_MYGCS"] == MAVSDK_GCS_ID
-        assert (vehicle.params["FS_GCS_ENABL"], vehicle.params["FS_LONG_ACTN"]) == (1, 1)
+        assert autopilot.params["SYSID_MYGCS"] == MAVSDK_GCS_ID
+        assert (autopilot.params["FS_GCS_ENABL"], autopilot.params["FS_LONG_ACTN"]) == (1, 1)
         await link.arm()
         await link.take_off(10.0)
         await link.start_offboard(east)
@@ -479,11 +477,11 @@ async def test_arduplane_4_7_gets_its_gcs_id_under_the_new_name():
         hub.link(1, LinkConfig(LIMITS)) as link,
     ):
         vehicle = sim.vehicles[0]
-        assert isinstance(vehicle, ArduPlaneVehicle)
+        autopilot = arduplane_of(vehicle)
         await link.wait_ready(20.0)
-        assert vehicle.params["MAV_GCS_SYSID"] == MAVSDK_GCS_ID
-        assert vehicle.is_gcs(MAVSDK_GCS_ID)
-        assert (vehicle.params["FS_GCS_ENABL"], vehicle.params["FS_LONG_ACTN"]) == (1, 1)
+        assert autopilot.params["MAV_GCS_SYSID"] == MAVSDK_GCS_ID
+        assert autopilot.is_gcs(MAVSDK_GCS_ID)
+        assert (autopilot.params["FS_GCS_ENABL"], autopilot.params["FS_LONG_ACTN"]) == (1, 1)
 
 
 async def test_failsafe_parameters_already_right_are_not_written():
@@ -497,11 +495,11 @@ async def test_failsafe_parameters_already_right_are_not_written():
         hub.link(1, LinkConfig(LIMITS)) as link,
     ):
         vehicle = sim.vehicles[0]
-        assert isinstance(vehicle, ArduPlaneVehicle)
-        before = dict(vehicle.params)
-        vehicle.param_write_denied = frozenset(before)  # any write would fail prepare()
+        autopilot = arduplane_of(vehicle)
+        before = dict(autopilot.params)
+        autopilot.param_write_denied = frozenset(before)  # any write would fail prepare()
         await link.wait_ready(10.0)
-        assert vehicle.params == before
+        assert autopilot.params == before
 
 
 async def test_refused_failsafe_parameter_write_refuses_the_vehicle_before_take_off():
@@ -513,10 +511,10 @@ async def test_refused_failsafe_parameter_write_refuses_the_vehicle_before_take_
         hub.link(1, LinkConfig(LIMITS)) as link,
     ):
         vehicle = sim.vehicles[0]
-        assert isinstance(vehicle, ArduPlaneVehicle)
-        vehicle.param_write_denied = frozenset({"FS_GCS_ENABL"})
+        autopilot = arduplane_of(vehicle)
+        autopilot.param_write_denied = frozenset({"FS_GCS_ENABL"})
         # ArduPlane answers "Param write denied" with the old value; MAVSDK resends, then gives up
         with pytest.raises(LinkError, match="cannot set FS_GCS_ENABL from 0 to 1: TIMEOUT"):
             await link.wait_ready(10.0)
-        assert vehicle.params["FS_GCS_ENABL"] == 0
+        assert autopilot.params["FS_GCS_ENABL"] == 0
         assert not vehicle.armed

@@ -34,7 +34,8 @@ import pytest_asyncio
 
 from app.cli import main
 from sitl.ports import find_free_udp_base_port
-from sitl.vehicle import AUTOPILOT_COMPONENT, HOLD
+from sitl.px4 import HOLD
+from sitl.vehicle import AUTOPILOT_COMPONENT
 from tests.mosquitto import Mosquitto, free_port
 from tests.sitl_fixtures import RawClient
 

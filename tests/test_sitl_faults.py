@@ -4,7 +4,7 @@ import asyncio
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.vehicle import HOLD
+from sitl.px4 import HOLD
 from tests.sitl_fixtures import RawClient, running_sim, sim_config, stream_setpoints
 
 

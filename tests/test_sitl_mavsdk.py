@@ -14,7 +14,7 @@ from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
 from sitl.fixedwing import wrap_pi
-from tests.sitl_fixtures import running_sim, sim_config
+from tests.sitl_fixtures import px4_of, running_sim, sim_config
 
 COMMANDED_COURSES_DEG = (90.0, -90.0, 180.0)  # every vehicle starts flying north
 
@@ -137,7 +137,10 @@ async def test_mavsdk_reads_and_sets_the_px4_failsafe_parameters():
             await params.set_param_float("COM_OF_LOSS_T", 2.5)
             assert await params.get_param_int("COM_OBL_RC_ACT") == 3
             vehicle = sim.vehicles[0]
-            assert (vehicle.failsafe_action, vehicle.offboard_timeout_s) == ("return", 2.5)
+            assert (px4_of(vehicle).failsafe_action, px4_of(vehicle).offboard_timeout_s) == (
+                "return",
+                2.5,
+            )
             everything = await params.get_all_params()
             names = {p.name for p in everything.int_params} | {
                 p.name for p in everything.float_params

@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.fixedwing import wrap_pi
 from sitl.guidance import LoiterCommand
-from sitl.vehicle import HOLD, OFFBOARD
+from sitl.px4 import HOLD, OFFBOARD
 from tests.sitl_fixtures import RawClient, running_sim, sim_config, stream_setpoints
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED

@@ -15,7 +15,10 @@ from sitl.config import CameraConfig, SimConfig, VehicleConfig, default_limits, 
 from sitl.fixedwing import FixedWingState, wrap_pi
 from sitl.geodesy import Geodesy
 from sitl.guidance import LineCommand, LoiterCommand, VelocityCommand
-from sitl.vehicle import CAMERA_COMPONENT, HOLD, OFFBOARD, RETURN, TAKEOFF, SimVehicle
+from sitl.px4 import HOLD, OFFBOARD, RETURN, TAKEOFF
+from sitl.server import autopilot_for
+from sitl.vehicle import CAMERA_COMPONENT, SimVehicle
+from tests.sitl_fixtures import px4_of
 
 DT = 0.02
 GCS = mavlink.MAVLink(None, 255, 190)
@@ -38,7 +41,10 @@ class Rig:
             self.sim.origin_lat_deg, self.sim.origin_lon_deg, self.sim.origin_alt_m
         )
         camera = TrackingCamera(CameraConfig(), np.random.default_rng(0))
-        self.vehicle = SimVehicle(0, self.sim.vehicles[0], self.sim, camera, self.geodesy)
+        vc = self.sim.vehicles[0]
+        self.vehicle = SimVehicle(
+            0, vc, self.sim, camera, self.geodesy, autopilot_for(vc, self.sim)
+        )
         self.t = 0.0
         self.sent = []
 
@@ -368,10 +374,10 @@ def test_takeoff_return_hold_and_change_speed():
 def test_non_finite_setpoints_are_dropped():
     rig = Rig()
     rig.setpoint(VELOCITY, vx=18.0)
-    kept = rig.vehicle.offboard_setpoint
+    kept = px4_of(rig.vehicle).offboard_setpoint
     rig.setpoint(VELOCITY, vx=math.nan, vy=1.0)
     rig.setpoint(POSITION, x=math.inf)
-    assert rig.vehicle.offboard_setpoint is kept
+    assert px4_of(rig.vehicle).offboard_setpoint is kept
 
 
 def test_loiter_radius_tighter_than_the_vehicle_can_turn_is_refused():
@@ -507,7 +513,7 @@ def test_px4_parameters_set_the_failsafe_cruise_speed_and_loiter_radius():
         "FW_AIRSPD_MAX",
     ]
     assert param_set("COM_OBL_RC_ACT", as_int32(3)) == as_int32(3)
-    assert rig.vehicle.failsafe_action == "return"
+    assert px4_of(rig.vehicle).failsafe_action == "return"
     assert param_set("COM_OF_LOSS_T", 3.0) == 3.0
     assert param_set("COM_OF_LOSS_T", -1.0) == 3.0  # refused, unchanged
     assert param_set("NAV_LOITER_RAD", 50.0) == pytest.approx(135.0)  # tighter than it can turn

@@ -28,7 +28,7 @@ from app.runtime.ports.vehicle import (
     VehicleTelemetry,
 )
 from sitl.server import SimulatorServer
-from tests.sitl_fixtures import running_sim, sim_config
+from tests.sitl_fixtures import px4_of, running_sim, sim_config
 
 SPEEDUP = 5.0
 LIMITS = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=24.0, max_course_rate_rad_s=0.2)
@@ -350,7 +350,7 @@ async def test_px4_fixed_wing_adapter_is_chosen_and_flies_the_line_setpoints():
         assert frame.flight_mode == "OFFBOARD"
         assert abs(wrap_pi(frame.course_rad - math.pi / 2)) < 0.02
         assert frame.ground_speed_m_s == pytest.approx(16.0, abs=0.2)
-        command = sim.vehicles[0].offboard_setpoint
+        command = px4_of(sim.vehicles[0]).offboard_setpoint
         assert type(command).__name__ == "LineCommand"
 
 
@@ -359,7 +359,7 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
     # PX4 adapter reads COM_OBL_RC_ACT and sets it to hold (5) before anything flies
     config = sim_config(1, speedup=SPEEDUP, failsafe_action="return")
     async with asyncio.timeout(40.0), running_sim(config) as sim:
-        action_before: str = sim.vehicles[0].failsafe_action
+        action_before: str = px4_of(sim.vehicles[0]).failsafe_action
         assert action_before == "return"
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
@@ -367,7 +367,7 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
         ):
             await link.wait_ready(10.0)
             assert link.autopilot_name == "px4-fixed-wing"
-            assert sim.vehicles[0].failsafe_action == "hold"
+            assert px4_of(sim.vehicles[0]).failsafe_action == "hold"
             assert sim.truth().vehicles[0].armed is False
 
 

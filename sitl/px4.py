@@ -1,0 +1,383 @@
+"""The simulator's PX4 personality: its heartbeat and modes, offboard setpoints, the commands it
+takes and the parameters it honours, and its offboard-loss failsafe.
+
+Over one ``sitl.vehicle.SimVehicle`` airframe (select it with ``SimConfig(autopilot="px4")``,
+the default). Before arming the vehicle stands at its launch point on the ground; arming
+launches it (as a catapult would) into its configured start state, in the air, in the current
+mode (hold at boot). It flies offboard velocity, position and position+velocity setpoints,
+holds, returns to its launch point, and falls back to hold (or return) when offboard setpoints
+stop.
+"""
+
+import logging
+import math
+import struct
+from dataclasses import dataclass
+from typing import Final
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl import telemetry
+from sitl.config import SimConfig
+from sitl.fixedwing import wrap_pi
+from sitl.guidance import Command, LineCommand, LoiterCommand, VelocityCommand, guide
+from sitl.vehicle import (
+    ARM_DISARM_FORCE,
+    AUTOPILOT_COMPONENT,
+    FlightMode,
+    Outgoing,
+    SilenceTimer,
+    SimVehicle,
+    as_int,
+    param_id_text,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Px4Mode:
+    """A PX4 flight mode: main mode in bits 16-23 of custom_mode, sub mode in bits 24-31."""
+
+    name: str
+    main: int
+    sub: int = 0
+
+    @property
+    def custom_mode(self) -> int:
+        return (self.main << 16) | (self.sub << 24)
+
+
+OFFBOARD: Final = Px4Mode("offboard", mavutil.PX4_CUSTOM_MAIN_MODE_OFFBOARD)
+HOLD: Final = Px4Mode(
+    "hold", mavutil.PX4_CUSTOM_MAIN_MODE_AUTO, mavutil.PX4_CUSTOM_SUB_MODE_AUTO_LOITER
+)
+RETURN: Final = Px4Mode(
+    "return", mavutil.PX4_CUSTOM_MAIN_MODE_AUTO, mavutil.PX4_CUSTOM_SUB_MODE_AUTO_RTL
+)
+TAKEOFF: Final = Px4Mode(
+    "takeoff", mavutil.PX4_CUSTOM_MAIN_MODE_AUTO, mavutil.PX4_CUSTOM_SUB_MODE_AUTO_TAKEOFF
+)
+_MODES_BY_CUSTOM: Final = {(m.main, m.sub): m for m in (OFFBOARD, HOLD, RETURN, TAKEOFF)}
+
+TAKEOFF_DURATION_S: Final = 5.0
+MIN_VELOCITY_SETPOINT_M_S: Final = 0.5
+
+# The PX4 parameters the simulator honours, in PARAM_REQUEST_LIST order
+PARAM_OFFBOARD_LOSS_TIMEOUT: Final = "COM_OF_LOSS_T"  # s, simulated
+PARAM_OFFBOARD_LOSS_ACTION: Final = "COM_OBL_RC_ACT"  # 3: return; anything else: hold
+PARAM_CRUISE_SPEED: Final = "FW_AIRSPD_TRIM"  # m/s
+PARAM_LOITER_RADIUS: Final = "NAV_LOITER_RAD"  # m
+# the airspeed range DO_CHANGE_SPEED setpoints are held within (m/s): the vehicle's speed limits,
+# read-only here
+PARAM_AIRSPEED_MIN: Final = "FW_AIRSPD_MIN"
+PARAM_AIRSPEED_MAX: Final = "FW_AIRSPD_MAX"
+_PARAM_TYPES: Final = {
+    PARAM_OFFBOARD_LOSS_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_OFFBOARD_LOSS_ACTION: mavlink.MAV_PARAM_TYPE_INT32,
+    PARAM_CRUISE_SPEED: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_LOITER_RADIUS: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MIN: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_AIRSPEED_MAX: mavlink.MAV_PARAM_TYPE_REAL32,
+}
+_PX4_RETURN_ACTION: Final = 3
+_PX4_HOLD_ACTION: Final = 5
+
+
+class Px4Autopilot:
+    """PX4 behind one simulated airframe: the mode it is in, its offboard setpoint and failsafe
+    parameters (COM_OF_LOSS_T, COM_OBL_RC_ACT), settable over MAVLink."""
+
+    def __init__(self, sim: SimConfig) -> None:
+        self.offboard_setpoint: Command | None = None
+        self.offboard_timeout_s = sim.offboard_timeout_s
+        self.failsafe_action = sim.failsafe_action
+        self._offboard_min_wall_s = sim.offboard_timeout_min_wall_s
+        self._setpoints = SilenceTimer()
+        self._mode_entered_t_s = 0.0
+
+    @property
+    def boot_mode(self) -> FlightMode:
+        return HOLD
+
+    # ---- modes -------------------------------------------------------------------------------
+
+    def mode_events(self, v: SimVehicle, t_s: float, wall_s: float) -> list[Outgoing]:
+        """Mode changes that happen on their own at ``t_s``: failsafe, end of take-off."""
+        out: list[Outgoing] = []
+        if v.mode is OFFBOARD and self._offboard_lost(t_s, wall_s):
+            action = RETURN if self.failsafe_action == "return" else HOLD
+            self._set_mode(v, action, t_s)
+            text = f"Failsafe: offboard lost, switching to {action.name}"
+            log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
+            out.append(v.statustext(mavlink.MAV_SEVERITY_WARNING, text))
+            out.append(v.heartbeat())
+            v.next_heartbeat_at(t_s + v.stream_interval_s(mavlink.MAVLINK_MSG_ID_HEARTBEAT))
+        if v.mode is TAKEOFF and t_s - self._mode_entered_t_s >= TAKEOFF_DURATION_S:
+            self._set_mode(v, HOLD, t_s)
+            out.append(v.statustext(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding"))
+        return out
+
+    def _offboard_lost(self, t_s: float, wall_s: float) -> bool:
+        return self._setpoints.silent(
+            t_s, wall_s, self.offboard_timeout_s, self._offboard_min_wall_s
+        )
+
+    def fly(self, v: SimVehicle, dt_s: float) -> None:
+        """One physics step in the air, flying the current command."""
+        if v.mode is OFFBOARD and self.offboard_setpoint is not None:
+            v.command = self.offboard_setpoint
+        limits = v.config.limits
+        course_cmd, speed_cmd = guide(v.state, v.command or v.hold_here(), limits.course_gain_per_s)
+        v.step(course_cmd, speed_cmd, limits, dt_s)
+
+    def _set_mode(self, v: SimVehicle, mode: FlightMode, t_s: float) -> None:
+        v.mode = mode
+        self._mode_entered_t_s = t_s
+        if mode is HOLD or mode is TAKEOFF:
+            v.command = v.hold_here()
+        elif mode is RETURN:
+            v.command = v.loiter_at(v.home_east_m, v.home_north_m)
+        elif mode is OFFBOARD:
+            v.command = self.offboard_setpoint
+
+    def launched(self, v: SimVehicle, t_s: float) -> None:
+        """The airframe has just been launched: fly the current mode from here."""
+        self._set_mode(v, v.mode, t_s)
+
+    def arm(self, v: SimVehicle, t_s: float) -> None:
+        """Arm and launch (no-op when armed)."""
+        if not v.armed:
+            v.armed = True
+            v.launch(t_s)
+
+    # ---- incoming ----------------------------------------------------------------------------
+
+    def handle(
+        self, v: SimVehicle, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
+    ) -> list[Outgoing]:
+        """Offboard setpoints and the parameter protocol."""
+        msg_id = msg.get_msgId()
+        if msg_id == mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED:
+            self._on_setpoint(v, msg, t_s, wall_s)
+            return []
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
+            if msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            names = list(_PARAM_TYPES)
+            index = msg.param_index
+            name = names[index] if 0 <= index < len(names) else param_id_text(msg.param_id)
+            return [self._param_value(v, name)] if name in _PARAM_TYPES else []
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
+            if msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            return [self._param_value(v, name) for name in _PARAM_TYPES]
+        if msg_id == mavlink.MAVLINK_MSG_ID_PARAM_SET:
+            name = param_id_text(msg.param_id)
+            if name not in _PARAM_TYPES or msg.target_component not in (0, AUTOPILOT_COMPONENT):
+                return []
+            self._set_param(v, name, msg.param_value)
+            return [self._param_value(v, name)]  # the value now in force (unchanged if refused)
+        return []
+
+    def _on_setpoint(
+        self, v: SimVehicle, msg: mavlink.MAVLink_message, t_s: float, wall_s: float
+    ) -> None:
+        values = (msg.x, msg.y, msg.vx, msg.vy, msg.yaw)
+        if msg.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
+            log.debug(
+                "vehicle %d: setpoint frame %d not supported", v.system_id, msg.coordinate_frame
+            )
+            return
+        mask = msg.type_mask
+        use_position = not (
+            mask
+            & (
+                mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE
+                | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
+            )
+        )
+        use_velocity = not (
+            mask
+            & (
+                mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE
+                | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
+            )
+        )
+        use_yaw = not (mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE)
+        if not all(math.isfinite(x) for x in values if x is not None):
+            used = (use_position, use_position, use_velocity, use_velocity, use_yaw)
+            if any(u and not math.isfinite(x) for u, x in zip(used, values, strict=True)):
+                log.debug("vehicle %d: non-finite setpoint dropped", v.system_id)
+                return
+        speed = math.hypot(msg.vx, msg.vy) if use_velocity else 0.0
+        setpoint: Command
+        if use_position and use_velocity and speed >= MIN_VELOCITY_SETPOINT_M_S:
+            setpoint = LineCommand(msg.y, msg.x, math.atan2(msg.vy, msg.vx), speed)
+        elif use_position:
+            setpoint = v.loiter_at(msg.y, msg.x)
+        elif use_velocity and speed >= MIN_VELOCITY_SETPOINT_M_S:
+            setpoint = VelocityCommand(math.atan2(msg.vy, msg.vx), speed)
+        elif use_yaw:
+            setpoint = VelocityCommand(wrap_pi(msg.yaw), max(speed, v.cruise_speed_m_s))
+        elif use_velocity:
+            setpoint = VelocityCommand(v.state.course_rad, speed)
+        else:
+            log.debug("vehicle %d: setpoint with nothing to fly dropped", v.system_id)
+            return
+        self.offboard_setpoint = setpoint
+        self._setpoints.heard(t_s, wall_s)
+        if v.mode is OFFBOARD:
+            v.command = setpoint
+
+    def run_command(
+        self,
+        v: SimVehicle,
+        command: int,
+        p: tuple[float, ...],
+        t_s: float,
+        wall_s: float,
+        frame: int | None,
+    ) -> tuple[int, list[Outgoing]]:
+        """One of PX4's commands (``frame`` None for COMMAND_LONG): the result and any replies."""
+        denied = mavlink.MAV_RESULT_DENIED
+        if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            was_armed = v.armed
+            result = self._arm_disarm(v, p[0] >= 0.5, as_int(p[1]) == ARM_DISARM_FORCE, t_s)
+            return result, ([v.heartbeat()] if v.armed != was_armed else [])
+        if command == mavlink.MAV_CMD_DO_SET_MODE:
+            return self._do_set_mode(v, as_int(p[0]), as_int(p[1]), as_int(p[2]), t_s, wall_s)
+        if command == mavlink.MAV_CMD_NAV_TAKEOFF:
+            if not v.armed:
+                return denied, []
+            return self._enter(v, TAKEOFF, t_s)
+        if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return self._enter(v, RETURN, t_s)
+        if command == mavlink.MAV_CMD_NAV_LOITER_UNLIM:
+            return self._enter(v, HOLD, t_s)
+        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            return self._change_speed(v, p[1]), []
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._reposition(v, p, t_s)
+        return mavlink.MAV_RESULT_UNSUPPORTED, []
+
+    def _enter(self, v: SimVehicle, mode: FlightMode, t_s: float) -> tuple[int, list[Outgoing]]:
+        changed = mode is not v.mode
+        self._set_mode(v, mode, t_s)
+        if mode is TAKEOFF and v.armed and not v.in_air:
+            v.launch(t_s)
+        out = [v.heartbeat()] if changed else []
+        return mavlink.MAV_RESULT_ACCEPTED, out
+
+    def _arm_disarm(self, v: SimVehicle, arm: bool, force: bool, t_s: float) -> int:
+        if arm:
+            self.arm(v, t_s)
+            return int(mavlink.MAV_RESULT_ACCEPTED)
+        if v.in_air and not force:
+            return int(mavlink.MAV_RESULT_DENIED)
+        v.disarm()
+        return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _do_set_mode(
+        self, v: SimVehicle, base_mode: int, main: int, sub: int, t_s: float, wall_s: float
+    ) -> tuple[int, list[Outgoing]]:
+        if not base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return mavlink.MAV_RESULT_DENIED, []
+        mode = _MODES_BY_CUSTOM.get((main, sub))
+        if main == mavutil.PX4_CUSTOM_MAIN_MODE_OFFBOARD:
+            mode = OFFBOARD
+        if mode is None:
+            return mavlink.MAV_RESULT_DENIED, []
+        if mode is OFFBOARD and (
+            self.offboard_setpoint is None or self._offboard_lost(t_s, wall_s)
+        ):
+            return mavlink.MAV_RESULT_DENIED, [
+                v.statustext(mavlink.MAV_SEVERITY_CRITICAL, "Offboard denied: no setpoints")
+            ]
+        if mode is TAKEOFF and not v.armed:
+            return mavlink.MAV_RESULT_DENIED, []
+        return self._enter(v, mode, t_s)
+
+    def _reposition(
+        self, v: SimVehicle, p: tuple[float, ...], t_s: float
+    ) -> tuple[int, list[Outgoing]]:
+        """Hold (loiter) at a latitude/longitude, as PX4 does for MAV_CMD_DO_REPOSITION."""
+        lat, lon = p[4], p[5]
+        if not (v.in_air and math.isfinite(lat) and math.isfinite(lon)):
+            return mavlink.MAV_RESULT_DENIED, []
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return mavlink.MAV_RESULT_DENIED, []
+        if math.isfinite(p[0]) and p[0] > 0.0:
+            self._change_speed(v, p[0])
+        east, north = v.local_of(lat, lon)
+        changed = v.mode is not HOLD
+        v.mode = HOLD
+        self._mode_entered_t_s = t_s
+        v.command = v.loiter_at(east, north)
+        return mavlink.MAV_RESULT_ACCEPTED, [v.heartbeat()] if changed else []
+
+    def _change_speed(self, v: SimVehicle, speed_m_s: float) -> int:
+        limits = v.config.limits
+        if speed_m_s < 0.0 or not math.isfinite(speed_m_s):
+            v.cruise_speed_m_s = v.config.cruise_speed_m_s
+        else:
+            v.cruise_speed_m_s = limits.clamp_speed(speed_m_s)
+        cmd = v.command
+        if isinstance(cmd, LoiterCommand) and v.mode is not OFFBOARD:
+            v.command = LoiterCommand(
+                cmd.center_east_m,
+                cmd.center_north_m,
+                cmd.radius_m,
+                cmd.clockwise,
+                v.cruise_speed_m_s,
+            )
+        return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    # ---- parameters --------------------------------------------------------------------------
+
+    def _param(self, v: SimVehicle, name: str) -> float:
+        if name == PARAM_OFFBOARD_LOSS_TIMEOUT:
+            return self.offboard_timeout_s
+        if name == PARAM_OFFBOARD_LOSS_ACTION:
+            return _PX4_RETURN_ACTION if self.failsafe_action == "return" else _PX4_HOLD_ACTION
+        if name == PARAM_CRUISE_SPEED:
+            return v.cruise_speed_m_s
+        if name == PARAM_AIRSPEED_MIN:
+            return v.config.limits.min_speed_m_s
+        if name == PARAM_AIRSPEED_MAX:
+            return v.config.limits.max_speed_m_s
+        return v.loiter_radius_m
+
+    def _set_param(self, v: SimVehicle, name: str, wire_value: float) -> None:
+        """Apply a PARAM_SET; a value out of range is refused (the old value stays)."""
+        if _PARAM_TYPES[name] == mavlink.MAV_PARAM_TYPE_INT32:
+            action = struct.unpack("<i", struct.pack("<f", wire_value))[0]  # bytewise encoding
+            self.failsafe_action = "return" if action == _PX4_RETURN_ACTION else "hold"
+            return
+        if not math.isfinite(wire_value):
+            return
+        if name == PARAM_OFFBOARD_LOSS_TIMEOUT and wire_value > 0.0:
+            self.offboard_timeout_s = wire_value
+        elif name == PARAM_CRUISE_SPEED and wire_value > 0.0:
+            self._change_speed(v, wire_value)
+        elif name == PARAM_LOITER_RADIUS and wire_value >= 1.05 * v.config.min_turn_radius_m:
+            v.loiter_radius_m = wire_value
+
+    def _param_value(self, v: SimVehicle, name: str) -> Outgoing:
+        names = list(_PARAM_TYPES)
+        kind = _PARAM_TYPES[name]
+        value = self._param(v, name)
+        if kind == mavlink.MAV_PARAM_TYPE_INT32:
+            value = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+        return AUTOPILOT_COMPONENT, mavlink.MAVLink_param_value_message(
+            name.encode("ascii"), value, kind, len(names), names.index(name)
+        )
+
+    # ---- outgoing ----------------------------------------------------------------------------
+
+    def heartbeat(self, v: SimVehicle) -> mavlink.MAVLink_message:
+        return telemetry.heartbeat(v.mode.custom_mode, v.armed)
+
+    def autopilot_version(self, v: SimVehicle) -> mavlink.MAVLink_message:
+        return telemetry.autopilot_version(v.system_id)
