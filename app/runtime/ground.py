@@ -184,14 +184,13 @@ class GroundStation:
             self._events.emit(event.kind, event.t_s, detail=event.detail)
         if out.fused is not None:
             await self._bus.publish(topics.GLOBAL_ESTIMATE, global_to_bus(out.fused, self.name))
-        if out.mission is not None:
-            m = out.mission
+        if (update := out.mission) is not None:
             mission = bus.MissionState(
                 sender=self.name,
-                t_s=m.t_s,
-                stage=m.stage.value,
-                active=m.active,
-                spacing_rad=m.spacing_rad,
+                t_s=update.t_s,
+                stage=update.stage.value,
+                active=update.active,
+                spacing_rad=update.spacing_rad,
             )
             await self._bus.publish(topics.MISSION, mission)
         for source in self._sources:
