@@ -1,4 +1,4 @@
-"""The ``standoff`` command line: the composition root, one module per subcommand.
+"""The ``standoff`` command line, one module per subcommand (``app.compose`` builds the mission).
 
 Each public module of this package is one subcommand: it defines ``ORDER`` (its place in
 ``standoff --help``) and ``register(subparsers)``, which adds its parser and sets ``handler``: a
