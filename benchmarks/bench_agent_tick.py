@@ -41,7 +41,7 @@ from app.core.mission.agent import (
     observe,
 )
 from app.core.mission.ground import GroundState, VehicleReport, hear_local, hear_status, tick
-from sitl.fixedwing import step
+from app.core.plant import step
 
 TICK_S = 0.1  # telemetry (and control) rate of the built-in simulator: 10 Hz
 PHYSICS_DT_S = 0.02

@@ -20,8 +20,8 @@ from typing import Final
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from app.core.frames import wrap_pi
 from sitl.config import SimConfig, VehicleConfig
-from sitl.fixedwing import wrap_pi
 from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
 from sitl.vehicle import (
     ARM_DISARM_FORCE,

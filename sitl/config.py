@@ -4,7 +4,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from sitl.fixedwing import FixedWingLimits, FixedWingState
+from app.core.plant import FixedWingState, VehicleEnvelope
 from sitl.target import Maneuver, TargetPath
 
 
@@ -88,7 +88,7 @@ class VehicleConfig:
     turn (times 1.05) is refused: the airframe could not fly it.
     """
 
-    limits: FixedWingLimits
+    limits: VehicleEnvelope
     start: FixedWingState
     cruise_speed_m_s: float
     altitude_m: float = 100.0
@@ -123,16 +123,20 @@ class VehicleConfig:
         return 1.5 * self.min_turn_radius_m
 
 
-def default_limits() -> FixedWingLimits:
+def default_limits() -> VehicleEnvelope:
     """The paper's vehicle: 18 m/s cruise within [12, 24] m/s, 0.2 rad/s course rate."""
-    return FixedWingLimits(
-        min_speed_m_s=12.0, max_speed_m_s=24.0, max_accel_m_s2=2.0, max_course_rate_rad_s=0.2
+    return VehicleEnvelope(
+        cruise_speed_m_s=18.0,
+        min_speed_m_s=12.0,
+        max_speed_m_s=24.0,
+        max_accel_m_s2=2.0,
+        max_course_rate_rad_s=0.2,
     )
 
 
 def default_vehicles(
     count: int,
-    limits: FixedWingLimits | None = None,
+    limits: VehicleEnvelope | None = None,
     cruise_speed_m_s: float = 18.0,
     altitude_m: float = 100.0,
     spacing_m: float = 100.0,

@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from sitl.fixedwing import FixedWingState
+from app.core.plant import FixedWingState
 
 LINE_LOOKAHEAD_M: Final = 50.0
 

@@ -18,9 +18,9 @@ from typing import Final
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from app.core.frames import wrap_pi
 from sitl import telemetry
 from sitl.config import SimConfig
-from sitl.fixedwing import wrap_pi
 from sitl.guidance import Command, LineCommand, LoiterCommand, VelocityCommand, guide
 from sitl.vehicle import (
     ARM_DISARM_FORCE,

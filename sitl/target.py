@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sitl.fixedwing import wrap_pi
+from app.core.frames import wrap_pi
 
 FloatArray = NDArray[np.float64]
 

@@ -10,8 +10,9 @@ from typing import Final
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from app.core.frames import wrap_pi
+from app.core.plant import FixedWingState
 from sitl.camera import Observation
-from sitl.fixedwing import FixedWingState, wrap_pi
 
 GRAVITY_M_S2: Final = 9.80665
 

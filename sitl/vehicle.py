@@ -16,10 +16,10 @@ from typing import Final, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from app.core.plant import FixedWingState, VehicleEnvelope, step
 from sitl import telemetry
 from sitl.camera import Observation, TrackingCamera
 from sitl.config import SimConfig, VehicleConfig
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 from sitl.geodesy import Geodesy
 from sitl.guidance import Command, LoiterCommand
 
@@ -246,7 +246,7 @@ class SimVehicle:
         return out
 
     def step(
-        self, course_cmd_rad: float, speed_cmd_m_s: float, limits: FixedWingLimits, dt_s: float
+        self, course_cmd_rad: float, speed_cmd_m_s: float, limits: VehicleEnvelope, dt_s: float
     ) -> None:
         """Fly the commanded course and speed for ``dt_s`` within ``limits``, in the wind."""
         self.state = step(

@@ -14,10 +14,10 @@ from app.core.agent import (
     OwnTelemetry,
     PhaseParams,
     TargetInfo,
-    VehicleEnvelope,
     agent_step,
 )
 from app.core.guidance import optimal_c
+from app.core.plant import VehicleEnvelope
 
 ENV = VehicleEnvelope(20.0, 13.0, 25.0, 2.0, 0.2, 1.0)
 PARAMS = AgentParams(0, ENV, GuidanceParams(300.0))

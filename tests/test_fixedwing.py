@@ -4,10 +4,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
+from app.core.plant import FixedWingState, VehicleEnvelope, step
 
-LIMITS = FixedWingLimits(
-    min_speed_m_s=13.0, max_speed_m_s=25.0, max_accel_m_s2=2.0, max_course_rate_rad_s=0.2
+LIMITS = VehicleEnvelope(
+    cruise_speed_m_s=20.0,
+    min_speed_m_s=13.0,
+    max_speed_m_s=25.0,
+    max_accel_m_s2=2.0,
+    max_course_rate_rad_s=0.2,
 )
 
 
@@ -64,6 +68,10 @@ def test_bad_commands_are_refused():
     with pytest.raises(ValueError, match="dt_s"):
         step(state, 0.0, 20.0, LIMITS, 0.0)
     with pytest.raises(ValueError, match="min_speed_m_s"):
-        FixedWingLimits(
-            min_speed_m_s=30.0, max_speed_m_s=25.0, max_accel_m_s2=2.0, max_course_rate_rad_s=0.2
+        VehicleEnvelope(
+            cruise_speed_m_s=28.0,
+            min_speed_m_s=30.0,
+            max_speed_m_s=25.0,
+            max_accel_m_s2=2.0,
+            max_course_rate_rad_s=0.2,
         )

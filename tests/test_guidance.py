@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq, minimize_scalar  # type: ignore[import-untyped]
 
 from app.core import guidance as g
+from app.core.frames import wrap_pi
 
 RD = 300.0
 finite_xy = st.floats(min_value=-5000.0, max_value=5000.0, allow_nan=False)
@@ -245,7 +246,7 @@ def test_feed_forward_course_error_decays_at_rate_k():
     k, w = 1.0, 0.2
     course, field_course, field_rate = 0.3, 0.35, -0.05
     cmd = g.course_command(course, field_course, field_rate, k, w)
-    rate = k * g._wrap_pi(cmd - course)
+    rate = k * wrap_pi(cmd - course)
     # de/dt = field_rate - rate = -k e
     assert field_rate - rate == pytest.approx(-k * (field_course - course))
     plain = g.course_command(course, field_course, field_rate, k, w, feed_forward=False)

@@ -15,15 +15,13 @@ from app.core.agent import (
     OwnTelemetry,
     PhaseParams,
     TargetInfo,
-    VehicleEnvelope,
     agent_step,
 )
+from app.core.plant import FixedWingState, VehicleEnvelope
 from app.runtime.fastsim import SimulationSetup, run_simulation
-from sitl.fixedwing import FixedWingLimits, FixedWingState
 from sitl.target import Maneuver, TargetPath
 
 ENV = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
-LIMITS = FixedWingLimits(10.0, 18.0, 2.0, 0.2)
 
 
 def test_the_circle_is_kept_while_it_is_flyable():
@@ -128,7 +126,7 @@ def _team_around(target_speed: float, orbit_plan: str) -> float:
         )
         for i in range(3)
     )
-    result = run_simulation(SimulationSetup(starts, agents, LIMITS, path, 0.05, 200.0))
+    result = run_simulation(SimulationSetup(starts, agents, ENV, path, 0.05, 200.0))
     err = result.distance_error_m()[result.t_s >= 60.0]
     return float(np.sqrt(np.mean(err * err)))
 

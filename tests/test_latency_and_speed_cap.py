@@ -22,15 +22,13 @@ from app.core.agent import (
     OwnTelemetry,
     PhaseParams,
     TargetInfo,
-    VehicleEnvelope,
     agent_step,
     predict_own,
 )
+from app.core.plant import FixedWingState, VehicleEnvelope, step
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 
 ENV = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
-LIMITS = FixedWingLimits(10.0, 18.0, 2.0, 0.2)
 
 
 # --- predict_own: the eq. (2) vehicle ahead of time ---------------------------------------------
@@ -49,7 +47,7 @@ def test_prediction_is_where_the_simulated_vehicle_goes(
     """One prediction of 0.1 s against the simulator's own fixed-wing in 5 steps of 0.02 s."""
     state = FixedWingState(100.0, -50.0, course, speed)
     for _ in range(5):
-        state = step(state, course_cmd, speed_cmd, LIMITS, 0.02)
+        state = step(state, course_cmd, speed_cmd, ENV, 0.02)
     got = predict_own(OwnTelemetry(100.0, -50.0, course, speed), course_cmd, speed_cmd, ENV, 0.1)
     # the simulator re-evaluates the saturating course loop every step; the prediction holds
     # its first rate: within a few cm and a small fraction of a degree over 0.1 s

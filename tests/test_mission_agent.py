@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.core.agent import AgentParams, GuidanceParams, OwnTelemetry, PhaseParams, VehicleEnvelope
+from app.core.agent import AgentParams, GuidanceParams, OwnTelemetry, PhaseParams
 from app.core.estimation.federated import MainParams
 from app.core.estimation.imm import default_imm_params
 from app.core.estimation.local import LocalParams
@@ -24,10 +24,9 @@ from app.core.mission.agent import (
     target_at,
 )
 from app.core.mission.stage import spacing_errors
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
+from app.core.plant import FixedWingState, VehicleEnvelope, step
 
 ENVELOPE = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
-LIMITS = FixedWingLimits(10.0, 18.0, 2.0, 0.2)
 
 
 def params(vehicle: int, feedback: str = "none") -> MissionAgentParams:
@@ -73,7 +72,7 @@ def fly_team(starts, states, plist, seconds, dt=0.1, fused=None, t0=0.0):
             states[i], cmd, _ = control(states[i], t, own(vehicles[i]), p)
             assert math.isfinite(cmd.course_rad)
             assert ENVELOPE.min_speed_m_s <= cmd.speed_m_s <= ENVELOPE.max_speed_m_s
-            vehicles[i] = step(vehicles[i], cmd.course_rad, cmd.speed_m_s, LIMITS, dt)
+            vehicles[i] = step(vehicles[i], cmd.course_rad, cmd.speed_m_s, ENVELOPE, dt)
     return vehicles, states
 
 
@@ -200,7 +199,7 @@ def _adjust_around_moving_target(moving_speed_m_s: float) -> float:
         state = hear_fused(state, fused, p)
         state, cmd, _ = control(state, t, own(vehicle), p)
         assert math.isfinite(cmd.course_rad)
-        vehicle = step(vehicle, cmd.course_rad, cmd.speed_m_s, LIMITS, 0.1)
+        vehicle = step(vehicle, cmd.course_rad, cmd.speed_m_s, ENVELOPE, 0.1)
         if t >= 90.0:
             errors.append(math.hypot(vehicle.east_m, vehicle.north_m - 7.0 * (t + 0.1)) - 90.0)
     return float(np.sqrt(np.mean(np.square(errors))))

@@ -7,8 +7,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from app.core import guidance, phase
+from app.core.frames import TAU
 
-TAU = 2.0 * math.pi
 angles = st.floats(min_value=-10.0, max_value=10.0, allow_nan=False)
 
 

@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.core.frames import wrap_pi
+from app.core.plant import FixedWingState, step
 from sitl.config import default_limits
-from sitl.fixedwing import FixedWingState, step, wrap_pi
 from sitl.guidance import (
     LINE_LOOKAHEAD_M,
     LineCommand,

@@ -13,7 +13,7 @@ from mavsdk.asyncio.plugins.offboard import OffboardAsync, VelocityNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
-from sitl.fixedwing import wrap_pi
+from app.core.frames import wrap_pi
 from tests.sitl_fixtures import px4_of, running_sim, sim_config
 
 COMMANDED_COURSES_DEG = (90.0, -90.0, 180.0)  # every vehicle starts flying north

@@ -7,7 +7,7 @@ import time
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.fixedwing import wrap_pi
+from app.core.frames import wrap_pi
 from sitl.guidance import LoiterCommand
 from sitl.px4 import HOLD, OFFBOARD
 from tests.sitl_fixtures import RawClient, running_sim, sim_config, stream_setpoints

@@ -10,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
+from app.core.frames import wrap_pi
+from app.core.plant import FixedWingState
 from sitl.camera import TrackingCamera
 from sitl.config import CameraConfig, SimConfig, VehicleConfig, default_limits, default_vehicles
-from sitl.fixedwing import FixedWingState, wrap_pi
 from sitl.geodesy import Geodesy
 from sitl.guidance import LineCommand, LoiterCommand, VelocityCommand
 from sitl.px4 import HOLD, OFFBOARD, RETURN, TAKEOFF

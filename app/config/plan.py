@@ -16,9 +16,9 @@ from app.core.agent import AgentParams, GuidanceParams, PhaseParams
 from app.core.mission.agent import MissionAgentParams
 from app.core.mission.ground import GroundParams
 from app.core.mission.stage import StageParams
+from app.core.plant import FixedWingState
 from app.errors import ConfigError
 from sitl.config import SimConfig, VehicleConfig
-from sitl.fixedwing import FixedWingState
 from sitl.target import TargetPath
 
 #: the angle between two neighbours on the standby circle at launch (rad)
@@ -47,7 +47,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
     lim = config.limits
     try:
         target = config.target.build()
-        envelope = lim.envelope()
+        envelope = lim.build()
         g = config.guidance
         guidance = GuidanceParams(
             radius_m=config.radius_m,

@@ -47,7 +47,7 @@ class ScenarioConfig(StrictModel):
 def build_setup(scenario: ScenarioConfig) -> SimulationSetup:
     """The ``SimulationSetup`` a scenario describes (raises ValueError on inconsistent values)."""
     lim = scenario.limits
-    envelope = lim.envelope()
+    envelope = lim.build()
     g = scenario.guidance
     guidance = GuidanceParams(
         radius_m=scenario.radius_m,
@@ -66,7 +66,7 @@ def build_setup(scenario: ScenarioConfig) -> SimulationSetup:
     return SimulationSetup(
         starts=tuple(v.build() for v in scenario.vehicles),
         agents=agents,
-        limits=lim.build(),
+        limits=envelope,
         target=scenario.target.build(dt_s=min(scenario.dt_s, 0.01)),
         dt_s=scenario.dt_s,
         duration_s=scenario.duration_s,

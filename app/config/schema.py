@@ -9,8 +9,7 @@ from typing import Annotated, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from app.core.agent import VehicleEnvelope
-from sitl.fixedwing import FixedWingLimits, FixedWingState
+from app.core.plant import FixedWingState, VehicleEnvelope
 from sitl.target import Leg, Maneuver, TargetPath
 
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -44,20 +43,10 @@ class LimitsConfig(StrictModel):
             )
         return self
 
-    def envelope(self) -> VehicleEnvelope:
-        """What guidance may ask of the vehicle (the agent's view of these limits)."""
+    def build(self) -> VehicleEnvelope:
+        """The one envelope type of the core and the simulator (``app.core.plant``)."""
         return VehicleEnvelope(
             cruise_speed_m_s=self.cruise_speed_m_s,
-            min_speed_m_s=self.min_speed_m_s,
-            max_speed_m_s=self.max_speed_m_s,
-            max_accel_m_s2=self.max_accel_m_s2,
-            max_course_rate_rad_s=self.max_course_rate_rad_s,
-            course_gain_per_s=self.course_gain_per_s,
-            speed_gain_per_s=self.speed_gain_per_s,
-        )
-
-    def build(self) -> FixedWingLimits:
-        return FixedWingLimits(
             min_speed_m_s=self.min_speed_m_s,
             max_speed_m_s=self.max_speed_m_s,
             max_accel_m_s2=self.max_accel_m_s2,

@@ -12,7 +12,9 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
-from app.core import guidance, phase
+from app.core import guidance, phase, plant
+from app.core.frames import wrap_pi
+from app.core.plant import VehicleEnvelope, require_positive
 
 GuidanceLaw = Literal["proposed", "frew", "fixed"]
 PhaseLaw = Literal["paper", "frew", "none"]
@@ -21,44 +23,6 @@ FieldMode = Literal["field", "inverse"]
 OrbitPlan = Literal["circle", "ellipse"]
 
 FREW_C = 2.0
-
-
-def _require_positive(owner: str, **values: float) -> None:
-    for name, value in values.items():
-        if not (math.isfinite(value) and value > 0.0):
-            raise ValueError(f"{owner}.{name} must be finite and > 0, got {value!r}")
-
-
-@dataclass(frozen=True, slots=True)
-class VehicleEnvelope:
-    """What the guidance may ask of the vehicle (Table 1): speeds m/s, acceleration m/s^2, course
-    rate rad/s, and k of eq. (2) (1/s), the autopilot's course-loop gain that the lag
-    compensation assumes."""
-
-    cruise_speed_m_s: float
-    min_speed_m_s: float
-    max_speed_m_s: float
-    max_accel_m_s2: float
-    max_course_rate_rad_s: float
-    course_gain_per_s: float = 1.0
-    speed_gain_per_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        _require_positive(
-            "VehicleEnvelope",
-            speed_gain_per_s=self.speed_gain_per_s,
-            cruise_speed_m_s=self.cruise_speed_m_s,
-            min_speed_m_s=self.min_speed_m_s,
-            max_speed_m_s=self.max_speed_m_s,
-            max_accel_m_s2=self.max_accel_m_s2,
-            max_course_rate_rad_s=self.max_course_rate_rad_s,
-            course_gain_per_s=self.course_gain_per_s,
-        )
-        if not self.min_speed_m_s <= self.cruise_speed_m_s <= self.max_speed_m_s:
-            raise ValueError(
-                "VehicleEnvelope needs min_speed_m_s <= cruise_speed_m_s <= max_speed_m_s, got "
-                f"{self.min_speed_m_s}, {self.cruise_speed_m_s}, {self.max_speed_m_s}"
-            )
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,7 +72,7 @@ class GuidanceParams:
     uses_inverse_field: bool = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        _require_positive(
+        require_positive(
             "GuidanceParams",
             radius_m=self.radius_m,
             c_update_speed_step_m_s=self.c_update_speed_step_m_s,
@@ -121,7 +85,7 @@ class GuidanceParams:
         if self.law == "fixed" and self.c is None:
             raise ValueError("GuidanceParams: law 'fixed' needs c")
         if self.c is not None:
-            _require_positive("GuidanceParams", c=self.c)
+            require_positive("GuidanceParams", c=self.c)
         if not (math.isfinite(self.curvature_margin) and 0.0 < self.curvature_margin <= 1.0):
             raise ValueError(
                 f"GuidanceParams.curvature_margin must be in (0, 1], got {self.curvature_margin!r}"
@@ -274,30 +238,13 @@ def predict_own(
     command: course rate k * wrap(command - course) saturated at the envelope's limit and held,
     acceleration ``speed_gain_per_s`` * (command - speed) saturated and held (the command
     clamped to the envelope, the speed never past it), position along the exact arc. The
-    latency compensation of ``mission_agent.control`` steers on this. ``dt_s = 0`` returns
-    ``own`` itself."""
+    latency compensation of ``mission.agent`` steers on this: ``plant.step`` without holding a
+    measured speed within the envelope. ``dt_s = 0`` returns ``own`` itself."""
     if dt_s == 0.0:
         return own
-    if not (math.isfinite(dt_s) and dt_s > 0.0):
-        raise ValueError(f"dt_s must be finite and >= 0, got {dt_s!r}")
-    w = envelope.max_course_rate_rad_s
-    rate = envelope.course_gain_per_s * guidance._wrap_pi(course_cmd_rad - own.course_rad)
-    rate = min(max(rate, -w), w)
-    target = min(max(speed_cmd_m_s, envelope.min_speed_m_s), envelope.max_speed_m_s)
-    a_max = envelope.max_accel_m_s2
-    accel = min(max(envelope.speed_gain_per_s * (target - own.speed_m_s), -a_max), a_max)
-    speed = own.speed_m_s + accel * dt_s
-    speed = min(speed, target) if accel > 0.0 else max(speed, target)
-    mean_speed = 0.5 * (own.speed_m_s + speed)
-    c0 = own.course_rad
-    c1 = c0 + rate * dt_s
-    if abs(rate * dt_s) > 1e-9:
-        d_east = mean_speed * (math.cos(c0) - math.cos(c1)) / rate
-        d_north = mean_speed * (math.sin(c1) - math.sin(c0)) / rate
-    else:
-        d_east = mean_speed * math.sin(c0) * dt_s
-        d_north = mean_speed * math.cos(c0) * dt_s
-    return OwnTelemetry(own.east_m + d_east, own.north_m + d_north, guidance._wrap_pi(c1), speed)
+    start = plant.FixedWingState(own.east_m, own.north_m, own.course_rad, own.speed_m_s)
+    ahead = plant.step(start, course_cmd_rad, speed_cmd_m_s, envelope, dt_s, hold_envelope=False)
+    return OwnTelemetry(ahead.east_m, ahead.north_m, ahead.course_rad, ahead.speed_m_s)
 
 
 def _check_inputs(inputs: AgentInputs) -> None:
@@ -530,7 +477,7 @@ def _switch_rule(
             else:
                 f_course, _ = guidance._course_and_rate(x, y, vx, vy, rd, c, sign, False)
                 flyable = guidance.peak_curvature(rd, c)[0] <= w / rel_speed * (1.0 + 1e-9)
-                skip = flyable and abs(guidance._wrap_pi(f_course - rel_course)) < 0.01
+                skip = flyable and abs(wrap_pi(f_course - rel_course)) < 0.01
         if skip:
             wanted = False
         else:

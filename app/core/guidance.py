@@ -24,7 +24,8 @@ simply flies out of the centre; this is stated in every function that can reach 
 import functools
 import math
 
-TAU = 2.0 * math.pi
+from app.core.frames import TAU, wrap_pi
+
 SQRT2 = math.sqrt(2.0)
 #: below this fraction of r_d from the target the field direction is undefined (eq. 8 is 0/0)
 CENTRE_RADIUS_FRACTION = 1e-9
@@ -41,10 +42,6 @@ def _check_field_params(radius_m: float, c: float) -> None:
         raise ValueError(f"radius_m (r_d) must be finite and > 0, got {radius_m!r}")
     if not (math.isfinite(c) and c > 0.0):
         raise ValueError(f"guidance parameter c must be finite and > 0, got {c!r}")
-
-
-def _wrap_pi(angle_rad: float) -> float:
-    return (angle_rad + math.pi) % TAU - math.pi
 
 
 # --------------------------------------------------------------------------------------------
@@ -413,12 +410,12 @@ def course_command(
 def _course_command(
     course: float, field_course: float, field_rate: float, k: float, w: float, ff: bool
 ) -> float:
-    lead = _wrap_pi(field_course - course)
+    lead = wrap_pi(field_course - course)
     if ff:
         lead += field_rate / k
     limit = w / k
     lead = min(max(lead, -limit), limit)
-    return _wrap_pi(course + lead)
+    return wrap_pi(course + lead)
 
 
 # --------------------------------------------------------------------------------------------
@@ -471,11 +468,11 @@ def predict_min_distance_error(
     while t < horizon_s:
         vx, vy = speed_m_s * math.sin(chi), speed_m_s * math.cos(chi)
         f_course, f_rate = _course_and_rate(x, y, vx, vy, radius_m, c, orbit_sign, False)
-        error = _wrap_pi(f_course - chi)
+        error = wrap_pi(f_course - chi)
         if flyable and abs(error) < 0.01:
             return min_err
         cmd = _course_command(chi, f_course, f_rate, k, w, feed_forward)
-        rate = min(max(k * _wrap_pi(cmd - chi), -w), w)
+        rate = min(max(k * wrap_pi(cmd - chi), -w), w)
         mid = chi + 0.5 * rate * step_s
         x += speed_m_s * math.sin(mid) * step_s
         y += speed_m_s * math.cos(mid) * step_s
@@ -724,7 +721,7 @@ def ellipse_course_and_rate(
     psi = math.atan2(beta * sp, alpha * cp)
     psi_dot = alpha * beta / (alpha * alpha * cp * cp + beta * beta * sp * sp) * phi_dot
     world = psi + math.atan2(uy, ux)
-    return _wrap_pi(0.5 * math.pi - world), -psi_dot
+    return wrap_pi(0.5 * math.pi - world), -psi_dot
 
 
 # --------------------------------------------------------------------------------------------

@@ -13,11 +13,7 @@ import itertools
 import math
 from collections.abc import Sequence
 
-TAU = 2.0 * math.pi
-
-
-def _wrap_pi(angle_rad: float) -> float:
-    return (angle_rad + math.pi) % TAU - math.pi
+from app.core.frames import TAU
 
 
 def orbit_order(phases_rad: Sequence[float]) -> tuple[int, ...]:

@@ -1,9 +1,9 @@
 """The fast numerical simulation: ``agent_step`` for n vehicles driving the eq. (2) fixed-wing of
-``sitl.fixedwing`` around a ``sitl.target`` path, in fixed steps, no asyncio, no clock.
+``app.core.plant`` around a ``sitl.target`` path, in fixed steps, no asyncio, no clock.
 
 Each step, every agent sees the team's positions at the start of the step (a synchronous,
 loss-free exchange), the true target state and its own telemetry; its command is then held
-over the step by ``sitl.fixedwing.step``. Figures of merit (settle time, crossings, phase
+over the step by ``app.core.plant.step``. Figures of merit (settle time, crossings, phase
 spacing) are pure functions of the result.
 """
 
@@ -26,8 +26,8 @@ from app.core.agent import (
 from app.core.frames import TAU
 from app.core.mission.stage import adjacent_phase_differences
 from app.core.phase import orbit_order, phase_time_lower_bound
+from app.core.plant import FixedWingState, VehicleEnvelope, step
 from app.core.sampled_run import FloatArray, SimulationResult
-from sitl.fixedwing import FixedWingLimits, FixedWingState, step
 from sitl.target import TargetPath
 
 
@@ -38,7 +38,7 @@ class SimulationSetup:
 
     starts: tuple[FixedWingState, ...]
     agents: tuple[AgentParams, ...]
-    limits: FixedWingLimits
+    limits: VehicleEnvelope
     target: TargetPath
     dt_s: float = 0.01
     duration_s: float = 400.0

@@ -1,7 +1,7 @@
 """The live mission's logic in one deterministic loop: no MAVLink, no bus, no clock.
 
 ``run_mission_sim`` flies the team of a ``MissionPlan`` (``app.config.plan.build_plan``) on
-the eq. (2) fixed-wing of ``sitl.fixedwing`` around the plan's scripted target, and pumps the
+the eq. (2) fixed-wing of ``app.core.plant`` around the plan's scripted target, and pumps the
 core's mission state machine (``app.core.mission.agent.step``, ``app.core.mission.ground.step``)
 in the order the live mission does, carrying each outbox to where the bus would:
 
@@ -35,9 +35,9 @@ from app.core.frames import wrap_pi
 from app.core.mission import agent as logic
 from app.core.mission import ground as ground_logic
 from app.core.mission.team import TeamSample
+from app.core.plant import VehicleEnvelope, step
 from app.report.summary import summarize
 from app.runtime import wire
-from sitl.fixedwing import FixedWingLimits, step
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +59,7 @@ class MissionSimSetup:
     latency_ticks: int = 0
     end_t_s: float | None = None
     track_override: tuple[AgentParams, ...] | None = None
-    vehicle_limits: FixedWingLimits | None = None
+    vehicle_limits: VehicleEnvelope | None = None
     truth_fed: bool = False
 
     def __post_init__(self) -> None:
