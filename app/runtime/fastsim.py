@@ -8,7 +8,8 @@ spacing) are pure functions of the result.
 """
 
 import math
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -59,6 +60,52 @@ class SimulationSetup:
             raise ValueError(f"duration_s must be finite and >= dt_s, got {self.duration_s!r}")
 
 
+Commands = list[tuple[float, float]]
+"""One (course rad, speed m/s) command per vehicle."""
+
+
+def fly_team(
+    starts: Sequence[FixedWingState],
+    limits: VehicleEnvelope,
+    dt_s: float,
+    steps_per_tick: int,
+    ticks: int,
+    control: Callable[[float, Sequence[FixedWingState]], Commands],
+    *,
+    latency_ticks: int = 0,
+    applied: Callable[[float, Commands, Sequence[FixedWingState]], None] | None = None,
+    stepped: Callable[[int, Sequence[FixedWingState]], None] | None = None,
+) -> list[FixedWingState]:
+    """The stepping loop of every fast simulation: ticks 0..``ticks`` at
+    ``t = tick * steps_per_tick * dt_s``; at each, ``control(t, team)`` gives the commands,
+    which act ``latency_ticks`` ticks later (``applied(t sent, commands, team)`` then) and are
+    held over the tick's ``steps_per_tick`` physics steps of ``dt_s`` (eq. 2,
+    ``app.core.plant.step``), after each of which ``stepped(step index from 1, team)`` runs.
+    Before the first commands act, each vehicle holds its start course and speed. Returns the
+    team at the last tick."""
+    vehicles = list(starts)
+    pending: deque[tuple[float, Commands]] = deque()
+    held = [(v.course_rad, v.speed_m_s) for v in vehicles]
+    step_index = 0
+    for tick in range(ticks + 1):
+        t = tick * steps_per_tick * dt_s
+        pending.append((t, control(t, vehicles)))
+        if len(pending) > latency_ticks:
+            sent_t, held = pending.popleft()
+            if applied is not None:
+                applied(sent_t, held, vehicles)
+        if tick == ticks:
+            break
+        for _ in range(steps_per_tick):
+            vehicles = [
+                step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=True)
+            ]
+            step_index += 1
+            if stepped is not None:
+                stepped(step_index, vehicles)
+    return vehicles
+
+
 def run_simulation(
     setup: SimulationSetup, states: Sequence[AgentState] | None = None
 ) -> SimulationResult:
@@ -71,10 +118,8 @@ def run_simulation(
     n = len(setup.starts)
     dt = setup.dt_s
     steps = round(setup.duration_s / dt)
-    limits = setup.limits
     agents = setup.agents
     agent_states = list(states) if states is not None else [AgentState() for _ in range(n)]
-    vehicles = list(setup.starts)
     rows = steps + 1
     events: list[tuple[int, AgentEvent]] = []
 
@@ -86,9 +131,8 @@ def run_simulation(
     team_phase = n > 1
 
     rec: list[float] = []  # per step: t, target east, north, then 8 values per vehicle
-    info = TargetInfo(0.0, 0.0)
-    for j in range(steps + 1):
-        t = j * dt
+
+    def control(t: float, vehicles: Sequence[FixedWingState]) -> list[tuple[float, float]]:
         if at_rest and t >= rest_after:
             info = rest_info
         else:
@@ -102,31 +146,32 @@ def run_simulation(
                 ts.a_north_m_s2,
             )
         team = tuple((v.east_m, v.north_m) for v in vehicles) if team_phase else ()
-        rec += (t, info.east_m, info.north_m)
-        new_vehicles = []
-        for i in range(n):
-            v = vehicles[i]
+        rec.extend((t, info.east_m, info.north_m))
+        commands = []
+        for i, v in enumerate(vehicles):
             own = OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
             state, command, evs = agent_step(
                 agent_states[i], AgentInputs(t, own, info, team), agents[i]
             )
             agent_states[i] = state
-            rec += (
-                v.east_m,
-                v.north_m,
-                v.course_rad,
-                v.speed_m_s,
-                v.course_rate_rad_s,
-                v.accel_m_s2,
-                command.c,
-                1.0 if command.inverse else 0.0,
+            rec.extend(
+                (
+                    v.east_m,
+                    v.north_m,
+                    v.course_rad,
+                    v.speed_m_s,
+                    v.course_rate_rad_s,
+                    v.accel_m_s2,
+                    command.c,
+                    1.0 if command.inverse else 0.0,
+                )
             )
             if evs:
                 events.extend((i, e) for e in evs)
-            if j < steps:
-                new_vehicles.append(step(v, command.course_rad, command.speed_m_s, limits, dt))
-        if j < steps:
-            vehicles = new_vehicles
+            commands.append((command.course_rad, command.speed_m_s))
+        return commands
+
+    fly_team(setup.starts, setup.limits, dt, 1, steps, control)
 
     g = agents[0].guidance
     table = np.asarray(rec, dtype=np.float64).reshape(rows, 3 + 8 * n)

@@ -21,7 +21,6 @@ station records (errors against the true target), so they read like a live run's
 """
 
 import math
-from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -35,9 +34,10 @@ from app.core.frames import wrap_pi
 from app.core.mission import agent as logic
 from app.core.mission import ground as ground_logic
 from app.core.mission.team import TeamSample
-from app.core.plant import VehicleEnvelope, step
+from app.core.plant import FixedWingState, VehicleEnvelope
 from app.report.summary import summarize
 from app.runtime import wire
+from app.runtime.fastsim import Commands, fly_team
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,23 +151,20 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     sigma = math.sqrt(setup.camera_sigma2_m2)
     rngs = [np.random.default_rng([setup.seed, i]) for i in range(n)]
 
-    vehicles = team_starts(plan)
     # statuses and the ground's tick at every control tick; estimates and the mission state on
     # the schedule the live mission keeps (both in the core's states)
     states = [logic.initial_agent_state(a, setup.estimate_period_s, 0.0) for a in agents]
     gstate = ground_logic.initial_ground_state(0.0, setup.mission_period_s)
     gparams = plan.ground
-    pending: deque[tuple[float, list[tuple[float, float]]]] = deque()
-    held = [(v.course_rad, v.speed_m_s) for v in vehicles]
     samples: list[TeamSample] = []
     commands: list[tuple[float, int, float, float, float]] = []
     events: list[tuple[float, str, str]] = []
     path = plan.target
 
-    step_index = 0
-    for tick in range(ticks + 1):
-        t = tick * per_tick * dt
-        # 1. statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes
+    def control(t: float, vehicles: Sequence[FixedWingState]) -> Commands:
+        """Statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes;
+        then each agent's command."""
+        nonlocal gstate
         owns = [OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s) for v in vehicles]
         statuses: list[tuple[int, logic.AgentStatus]] = []
         for i, own in enumerate(owns):
@@ -188,48 +185,58 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
             fixes = [logic.HeardTeammate(j, _fix(s)) for j, s in statuses if j != i]
             for event in (*inputs, *fixes):
                 states[i], _ = logic.step(states[i], event, agents[i])
-        # 2. control
         if setup.truth_fed:
             exact = _truth_estimate(t, path.state_at(t))
-            states = [replace(s, fused=exact) for s in states]
+            states[:] = [replace(s, fused=exact) for s in states]
         out_commands = []
         for i, own in enumerate(owns):
             states[i], out = logic.step(states[i], logic.Control(t, own), agents[i])
             events.extend((e.t_s, e.kind, f"vehicle {i}: {e.detail}") for e in out.events)
             command = out.command
-            out_commands.append(
-                held[i] if command is None else (command.course_rad, command.speed_m_s)
+            if command is None:  # a holding agent: the vehicle keeps its course and speed
+                out_commands.append((own.course_rad, own.speed_m_s))
+            else:
+                out_commands.append((command.course_rad, command.speed_m_s))
+        return out_commands
+
+    def applied(sent_t: float, held: Commands, vehicles: Sequence[FixedWingState]) -> None:
+        for i, ((course, speed), v) in enumerate(zip(held, vehicles, strict=True)):
+            # the course rate it asks of the vehicle it now acts on
+            rate = k_gain * wrap_pi(course - v.course_rad)
+            commands.append((sent_t, i, course, speed, rate))
+
+    def stepped(step_index: int, vehicles: Sequence[FixedWingState]) -> None:
+        """The cameras, every camera period; the local estimates when due -> ground."""
+        nonlocal gstate
+        if step_index % per_camera:
+            return
+        ts = step_index * dt
+        target = path.state_at(ts)
+        for i in range(n):
+            draws = rngs[i].standard_normal(2)
+            obs = Observation(
+                ts,
+                agents[i].sensor,
+                target.east_m + sigma * float(draws[0]),
+                target.north_m + sigma * float(draws[1]),
+                sigma if sigma > 0.0 else None,
             )
-        pending.append((t, out_commands))
-        if len(pending) > setup.latency_ticks:
-            sent_t, held = pending.popleft()
-            for i, ((course, speed), v) in enumerate(zip(held, vehicles, strict=True)):
-                # the course rate it asks of the vehicle it now acts on
-                rate = k_gain * wrap_pi(course - v.course_rad)
-                commands.append((sent_t, i, course, speed, rate))
-        if tick == ticks:
-            break
-        # 3. fly to the next tick; cameras and local estimates on the way
-        for _ in range(per_tick):
-            vehicles = [step(v, c, s, limits, dt) for v, (c, s) in zip(vehicles, held, strict=True)]
-            step_index += 1
-            if step_index % per_camera:
-                continue
-            ts = step_index * dt
-            target = path.state_at(ts)
-            for i in range(n):
-                draws = rngs[i].standard_normal(2)
-                obs = Observation(
-                    ts,
-                    agents[i].sensor,
-                    target.east_m + sigma * float(draws[0]),
-                    target.north_m + sigma * float(draws[1]),
-                    sigma if sigma > 0.0 else None,
-                )
-                states[i], out = logic.step(states[i], logic.Observed(obs), agents[i])
-                if out.estimate is not None:
-                    local = ground_logic.HeardLocal(_bus_local(out.estimate, i))
-                    gstate, _ = ground_logic.step(gstate, local, gparams)
+            states[i], out = logic.step(states[i], logic.Observed(obs), agents[i])
+            if out.estimate is not None:
+                local = ground_logic.HeardLocal(_bus_local(out.estimate, i))
+                gstate, _ = ground_logic.step(gstate, local, gparams)
+
+    fly_team(
+        team_starts(plan),
+        limits,
+        dt,
+        per_tick,
+        ticks,
+        control,
+        latency_ticks=setup.latency_ticks,
+        applied=applied,
+        stepped=stepped,
+    )
     summary = summarize(
         samples,
         cfg.radius_m,
