@@ -257,7 +257,7 @@ class VehicleAgent:
             course_rad=status.course_rad,
             speed_m_s=status.speed_m_s,
             phase_rad=status.phase_rad,
-            stage=status.stage.value,
+            stage=status.stage,
             link="ok" if self._link.link_ok else "lost",
             healthy=status.healthy,
         )

@@ -188,7 +188,7 @@ class GroundStation:
             mission = bus.MissionState(
                 sender=self.name,
                 t_s=update.t_s,
-                stage=update.stage.value,
+                stage=update.stage,
                 active=update.active,
                 spacing_rad=update.spacing_rad,
             )

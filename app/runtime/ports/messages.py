@@ -17,6 +17,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from app.core.mission.stage import Stage
+
 SCHEMA_VERSION = 2
 STATE_DIM = 6
 STATE_ORDER = ("east_m", "v_east_m_s", "north_m", "v_north_m_s", "a_east_m_s2", "a_north_m_s2")
@@ -29,7 +31,6 @@ Positive = Annotated[float, Field(gt=0.0)]
 State = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Row = Annotated[tuple[float, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
 Covariance = Annotated[tuple[Row, ...], Field(min_length=STATE_DIM, max_length=STATE_DIM)]
-Stage = Literal["standby", "gather", "adjust", "track"]
 MAX_MODELS = 8
 Probabilities = Annotated[
     tuple[Annotated[float, Field(ge=0.0, le=1.0)], ...], Field(max_length=MAX_MODELS)
