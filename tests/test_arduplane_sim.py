@@ -20,6 +20,7 @@ from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.core.frames import wrap_pi
+from app.core.plant import VehicleEnvelope
 from app.errors import LinkError
 from app.runtime.ports.vehicle import CourseSpeedCommand, LeftOffboard, OffboardLostError
 from sitl.arduplane import GUIDED, heading_for_ground_course, long_failsafe_mode
@@ -32,7 +33,7 @@ from tests.sitl_fixtures import arduplane_of, running_sim, sim_config
 from tests.test_vehicle_link_sim import fly, next_event, origin_of, urls_of
 
 SPEEDUP = 8.0
-LIMITS = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=24.0, max_course_rate_rad_s=0.2)
+LIMITS = SetpointLimits(VehicleEnvelope(18.0, 12.0, 24.0, 2.0, 0.2))
 MAVSDK_GCS_ID = 245  # MAVSDK's ground-station system id (ArduPilot's SYSID_MYGCS default: 255)
 ACCEPTED, DENIED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
 FAILED, UNSUPPORTED = mavlink.MAV_RESULT_FAILED, mavlink.MAV_RESULT_UNSUPPORTED
@@ -366,7 +367,7 @@ async def test_arduplane_adapter_is_chosen_takes_off_flies_courses_and_stops_in_
 
 async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_result():
     config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
-    wide = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=30.0, max_course_rate_rad_s=0.2)
+    wide = SetpointLimits(VehicleEnvelope(21.0, 12.0, 30.0, 2.0, 0.2))
     async with asyncio.timeout(40.0), running_sim(config) as sim:
         vehicle = sim.vehicles[0]
         autopilot = arduplane_of(vehicle)
@@ -392,7 +393,7 @@ async def test_refused_mode_change_and_refused_speed_are_link_errors_with_the_re
 
 async def test_a_mission_faster_than_the_airspeed_range_is_refused_before_take_off():
     config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")  # AIRSPEED 12-24 m/s
-    wide = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+    wide = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2))
     async with asyncio.timeout(30.0), running_sim(config) as sim:
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,

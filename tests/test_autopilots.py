@@ -25,10 +25,11 @@ from app.adapters.vehicle.autopilots.limits import SentSetpoint, SetpointLimits,
 from app.adapters.vehicle.autopilots.px4 import Px4FixedWingAdapter, px4_mode_name
 from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.core.frames import wrap_pi
+from app.core.plant import VehicleEnvelope
 from app.errors import LinkError
 from app.runtime.ports.vehicle import CourseSpeedCommand, UnsupportedVehicleError
 
-LIMITS = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+LIMITS = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2))
 STATE = VehicleState(t_s=12.0, course_rad=0.0, relative_altitude_m=100.0)
 
 
@@ -128,8 +129,16 @@ def test_command_rejects_non_finite_or_negative_values(course, speed, altitude):
 
 
 def test_limits_reject_inverted_speeds():
-    with pytest.raises(ValueError, match="exceeds"):
-        SetpointLimits(min_speed_m_s=20.0, max_speed_m_s=18.0)
+    # the speeds are the envelope's, which refuses them when built
+    with pytest.raises(ValueError, match="min_speed_m_s <= cruise_speed_m_s <= max_speed_m_s"):
+        SetpointLimits(VehicleEnvelope(19.0, 20.0, 18.0, 2.0, 0.2))
+
+
+def test_limits_reject_a_setpoint_only_limit_that_is_not_positive():
+    with pytest.raises(ValueError, match="max_climb_rate_m_s must be finite and > 0"):
+        SetpointLimits(LIMITS.envelope, max_climb_rate_m_s=0.0)
+    with pytest.raises(ValueError, match="altitude_gain_per_s must be finite and > 0"):
+        SetpointLimits(LIMITS.envelope, altitude_gain_per_s=math.nan)
 
 
 # ---- limiter ---------------------------------------------------------------------------------
@@ -179,7 +188,7 @@ def test_time_running_backwards_allows_no_course_change():
 
 
 def test_no_course_rate_limit_leaves_course_free():
-    free = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=None)
+    free = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2), limit_course_change=False)
     previous = SentSetpoint(t_s=0.0, course_rad=0.0, speed_m_s=14.0)
     out, why = limit_setpoint(CourseSpeedCommand(2.0, 14.0), 0.0, previous, free)
     assert (out.course_rad, why) == (2.0, ())
@@ -196,7 +205,7 @@ def test_limited_setpoints_are_always_within_the_envelope(course, speed, previou
     out, _ = limit_setpoint(CourseSpeedCommand(course, speed), 10.0 + dt, previous, LIMITS)
     assert math.isfinite(out.course_rad)
     assert -math.pi <= out.course_rad < math.pi
-    assert LIMITS.min_speed_m_s <= out.speed_m_s <= LIMITS.max_speed_m_s
+    assert LIMITS.envelope.min_speed_m_s <= out.speed_m_s <= LIMITS.envelope.max_speed_m_s
     turned = abs(wrap_pi(out.course_rad - previous_course))
     assert turned <= 0.2 * max(dt, 0.0) + 1e-6
 
@@ -592,7 +601,7 @@ async def test_arduplane_without_a_course_rate_limit_does_not_send_a_lateral_acc
     # ArduPlane takes GUIDED_CHANGE_HEADING param3 as at least 0.05 m/s^2 (MAX(param3, 0.05f)):
     # 0 would bank it by 0.3 degrees. Unlimited must be a value that leaves the turn to it.
     commands = CommandRecorder()
-    free = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=None)
+    free = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2), limit_course_change=False)
     adapter = arduplane(commands, limits=free)
     await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
     heading = commands.sent[0][3]

@@ -17,6 +17,7 @@ from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
 from app.adapters.vehicle.mavsdk.logs import RepeatLimiter
 from app.adapters.vehicle.mavsdk.urls import validate_url
+from app.core.plant import VehicleEnvelope
 from app.errors import ConfigError, LinkError
 from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
@@ -27,7 +28,9 @@ from app.runtime.ports.vehicle import (
 from sitl.ports import find_free_udp_base_port
 
 ORIGIN = GeodeticOrigin(47.397742, 8.545594, 488.0)
-CONFIG = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), autopilot="velocity")
+CONFIG = LinkConfig(
+    SetpointLimits(VehicleEnvelope(18.0, 12.0, 24.0, 2.0, 0.2)), autopilot="velocity"
+)
 
 
 @pytest.mark.parametrize(
@@ -257,7 +260,9 @@ def test_malformed_fields_raise_for_the_reader_to_count():
 
 async def test_watchdog_declares_the_link_lost_after_the_timeout_of_silence():
     now = [100.0]
-    config = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), link_timeout_s=0.04)
+    config = LinkConfig(
+        SetpointLimits(VehicleEnvelope(18.0, 12.0, 24.0, 2.0, 0.2)), link_timeout_s=0.04
+    )
     vehicle = link(lambda: now[0], config)
     vehicle._latest = vehicle._frame(position(3_000))
     vehicle._last_rx = 100.0
@@ -334,7 +339,9 @@ async def test_a_refused_arm_is_a_link_error_with_the_result():
 
 
 async def test_an_offboard_start_the_vehicle_acks_but_never_shows_is_a_link_error():
-    config = LinkConfig(SetpointLimits(12.0, 24.0, 0.2), mode_confirm_timeout_s=0.1)
+    config = LinkConfig(
+        SetpointLimits(VehicleEnvelope(18.0, 12.0, 24.0, 2.0, 0.2)), mode_confirm_timeout_s=0.1
+    )
     vehicle = link(config=config)
     offboard = AcceptingOffboard()
     vehicle._adapter = VelocityAdapter(vehicle_id=4, offboard=offboard, limits=config.limits)

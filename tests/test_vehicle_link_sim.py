@@ -14,6 +14,7 @@ from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
 from app.core.frames import wrap_pi
+from app.core.plant import VehicleEnvelope
 from app.errors import LinkError
 from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
@@ -31,7 +32,7 @@ from sitl.server import SimulatorServer
 from tests.sitl_fixtures import px4_of, running_sim, sim_config
 
 SPEEDUP = 5.0
-LIMITS = SetpointLimits(min_speed_m_s=12.0, max_speed_m_s=24.0, max_course_rate_rad_s=0.2)
+LIMITS = SetpointLimits(VehicleEnvelope(18.0, 12.0, 24.0, 2.0, 0.2))
 VELOCITY = LinkConfig(LIMITS, autopilot="velocity")
 
 
@@ -373,7 +374,7 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
 
 async def test_px4_whose_airspeed_range_misses_the_missions_speeds_is_refused_before_take_off():
     config = sim_config(1, speedup=SPEEDUP)  # FW_AIRSPD_MIN / _MAX: 12 / 24 m/s
-    slow = SetpointLimits(min_speed_m_s=10.0, max_speed_m_s=18.0, max_course_rate_rad_s=0.2)
+    slow = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2))
     async with asyncio.timeout(40.0), running_sim(config) as sim:
         async with (
             MavsdkHub(urls_of(sim), origin_of(sim)) as hub,

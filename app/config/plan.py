@@ -108,7 +108,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
         # The agent's command already keeps the implied course rate k (command - course) within
         # the limit (agent_step); the link's own course-change limiter would clip the lag
         # compensation, so the link checks speed and finiteness only.
-        limits = SetpointLimits(lim.min_speed_m_s, lim.max_speed_m_s, None, lim.max_accel_m_s2)
+        limits = SetpointLimits(envelope, limit_course_change=False)
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
     end = config.end_s if config.end_s is not None else target.duration_s + config.tail_s

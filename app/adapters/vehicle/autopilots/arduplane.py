@@ -234,7 +234,7 @@ class ArduPlaneAdapter:
         )
 
     def heading_command(self, course_rad: float, speed_m_s: float) -> MavlinkMessage:
-        rate = self.limits.max_course_rate_rad_s
+        rate = self.limits.max_course_change_rad_s
         max_lateral_accel = speed_m_s * rate if rate is not None else UNLIMITED_LATERAL_ACCEL_M_S2
         return command_int(
             self.vehicle_id,
@@ -253,7 +253,7 @@ class ArduPlaneAdapter:
             self.vehicle_id,
             self.target_component,
             mavlink.MAV_CMD_GUIDED_CHANGE_SPEED,
-            (mavlink.SPEED_TYPE_AIRSPEED, speed_m_s, self.limits.max_accel_m_s2, 0.0),
+            (mavlink.SPEED_TYPE_AIRSPEED, speed_m_s, self.limits.envelope.max_accel_m_s2, 0.0),
         )
 
     def altitude_command(self, altitude_m: float) -> MavlinkMessage:

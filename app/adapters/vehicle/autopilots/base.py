@@ -254,10 +254,11 @@ async def check_speed_range(
         )
         return
     log.info("vehicle %d: %s = %g, %s = %g", vehicle_id, low[0], low[1], high[0], high[1])
-    if limits.min_speed_m_s < low[1] or limits.max_speed_m_s > high[1]:
+    envelope = limits.envelope
+    if envelope.min_speed_m_s < low[1] or envelope.max_speed_m_s > high[1]:
         raise LinkError(
-            f"vehicle {vehicle_id}: the mission commands {limits.min_speed_m_s:g}-"
-            f"{limits.max_speed_m_s:g} m/s, but {what} of {low[1]:g}-{high[1]:g} m/s only "
+            f"vehicle {vehicle_id}: the mission commands {envelope.min_speed_m_s:g}-"
+            f"{envelope.max_speed_m_s:g} m/s, but {what} of {low[1]:g}-{high[1]:g} m/s only "
             f"({low[0]}, {high[0]}): widen those or narrow the mission's speed limits"
         )
 

@@ -1,4 +1,5 @@
-"""The envelope every outgoing setpoint is held to, and the limiter that holds it there."""
+"""What every outgoing setpoint is held to (the vehicle's envelope and the setpoint-only
+limits), and the limiter that holds it there."""
 
 from __future__ import annotations
 
@@ -7,42 +8,37 @@ from dataclasses import dataclass, replace
 from typing import Final, Literal
 
 from app.core.frames import wrap_pi
+from app.core.plant import VehicleEnvelope, require_positive
 from app.runtime.ports.vehicle import CourseSpeedCommand
 
 
 @dataclass(frozen=True, slots=True)
 class SetpointLimits:
-    """The envelope every outgoing setpoint is held to (Table 2: 10..18 m/s, 0.2 rad/s).
+    """What every outgoing setpoint is held to: the vehicle's ``envelope`` (Table 2: 10..18 m/s,
+    2 m/s^2, 0.2 rad/s) and what only setpoints need.
 
-    ``max_course_rate_rad_s`` bounds how fast the *commanded* course may turn between two
-    setpoints (vehicle time); ``None`` leaves the course unconstrained.
+    ``limit_course_change``: the *commanded* course turns no faster than the envelope's course
+    rate between two setpoints (vehicle time); False leaves the course unconstrained.
+    ``max_climb_rate_m_s`` and ``altitude_gain_per_s``: the climb rate commanded towards the
+    altitude, gain * error saturated at the maximum.
     """
 
-    min_speed_m_s: float
-    max_speed_m_s: float
-    max_course_rate_rad_s: float | None = None
-    max_accel_m_s2: float = 2.0
+    envelope: VehicleEnvelope
+    limit_course_change: bool = True
     max_climb_rate_m_s: float = 3.0
     altitude_gain_per_s: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in (
-            "min_speed_m_s",
-            "max_speed_m_s",
-            "max_accel_m_s2",
-            "max_climb_rate_m_s",
-            "altitude_gain_per_s",
-        ):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        if self.min_speed_m_s > self.max_speed_m_s:
-            raise ValueError(
-                f"min_speed_m_s ({self.min_speed_m_s}) exceeds max_speed_m_s ({self.max_speed_m_s})"
-            )
-        rate = self.max_course_rate_rad_s
-        if rate is not None and not (math.isfinite(rate) and rate > 0.0):
-            raise ValueError(f"max_course_rate_rad_s must be finite and > 0, got {rate!r}")
+        require_positive(
+            "SetpointLimits",
+            max_climb_rate_m_s=self.max_climb_rate_m_s,
+            altitude_gain_per_s=self.altitude_gain_per_s,
+        )
+
+    @property
+    def max_course_change_rad_s(self) -> float | None:
+        """How fast the commanded course may turn (rad/s); None: unconstrained."""
+        return self.envelope.max_course_rate_rad_s if self.limit_course_change else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,34 +75,35 @@ def limit_setpoint(
     """The command brought within the limits, and why it had to be (empty when it was not).
 
     Speed is clamped into [min, max]. When a previous setpoint is known, the course moves
-    towards the requested one by at most ``max_course_rate_rad_s * (t_s - previous.t_s)``
+    towards the requested one by at most ``max_course_change_rad_s * (t_s - previous.t_s)``
     (the shorter way round); time running backwards counts as no time.
     """
     reasons: list[Limited] = []
+    envelope = limits.envelope
     speed = command.speed_m_s
-    if speed < limits.min_speed_m_s:
+    if speed < envelope.min_speed_m_s:
         reasons.append(
-            Limited("speed_below_min", f"speed {speed:.3f} m/s below {limits.min_speed_m_s} m/s")
+            Limited("speed_below_min", f"speed {speed:.3f} m/s below {envelope.min_speed_m_s} m/s")
         )
-        speed = limits.min_speed_m_s
-    elif speed > limits.max_speed_m_s:
+        speed = envelope.min_speed_m_s
+    elif speed > envelope.max_speed_m_s:
         reasons.append(
-            Limited("speed_above_max", f"speed {speed:.3f} m/s above {limits.max_speed_m_s} m/s")
+            Limited("speed_above_max", f"speed {speed:.3f} m/s above {envelope.max_speed_m_s} m/s")
         )
-        speed = limits.max_speed_m_s
+        speed = envelope.max_speed_m_s
     course = command.course_rad
     if not -math.pi <= course < math.pi:
         course = wrap_pi(course)
-    if previous is not None and limits.max_course_rate_rad_s is not None:
+    rate = limits.max_course_change_rad_s
+    if previous is not None and rate is not None:
         dt = max(t_s - previous.t_s, 0.0)
-        allowed = limits.max_course_rate_rad_s * dt
+        allowed = rate * dt
         delta = wrap_pi(course - previous.course_rad)
         if abs(delta) > allowed + COURSE_TOLERANCE_RAD:
             reasons.append(
                 Limited(
                     "course_rate",
-                    f"course change {delta:+.4f} rad in {dt:.3f} s exceeds "
-                    f"{limits.max_course_rate_rad_s} rad/s",
+                    f"course change {delta:+.4f} rad in {dt:.3f} s exceeds {rate} rad/s",
                 )
             )
             course = wrap_pi(previous.course_rad + math.copysign(allowed, delta))
