@@ -25,7 +25,7 @@ from scipy.optimize import brentq, minimize_scalar  # type: ignore[import-untype
 
 from app.config import load_config
 from app.config.scenario import ScenarioConfig, build_setup
-from app.core.guidance import curvature, optimal_c
+from app.core.guidance.field import curvature, optimal_c
 from app.runtime.fastsim import (
     SimulationSetup,
     phase_figures,

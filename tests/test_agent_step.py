@@ -16,7 +16,7 @@ from app.core.agent import (
     TargetInfo,
     agent_step,
 )
-from app.core.guidance import optimal_c
+from app.core.guidance.field import optimal_c
 from app.core.plant import VehicleEnvelope
 
 ENV = VehicleEnvelope(20.0, 13.0, 25.0, 2.0, 0.2, 1.0)

@@ -8,8 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq, minimize_scalar  # type: ignore[import-untyped]
 
-from app.core import guidance as g
 from app.core.frames import wrap_pi
+from app.core.guidance import course as gc
+from app.core.guidance import field as g
+from app.core.guidance import moving_target as gm
+from app.core.guidance.course import CourseLoop
+from app.core.guidance.field import FieldParams
 
 RD = 300.0
 finite_xy = st.floats(min_value=-5000.0, max_value=5000.0, allow_nan=False)
@@ -105,7 +109,7 @@ def test_field_course_rate_along_the_field_is_speed_times_curvature():
     for c in (0.19, 0.8, 2.0):
         for x, y in [(700.0, 100.0), (320.0, -50.0), (-30.0, 410.0)]:
             vx, vy = g.field_velocity(x, y, RD, c, s)
-            course, rate = g.field_course(x, y, vx, vy, RD, c)
+            course, rate = g.field_course(x, y, vx, vy, FieldParams(RD, c))
             assert course == pytest.approx(math.atan2(vx, vy))
             # course is clockwise, curvature counter-clockwise positive
             assert -rate == pytest.approx(s * g.curvature(math.hypot(x, y), RD, c), rel=1e-9)
@@ -113,7 +117,7 @@ def test_field_course_rate_along_the_field_is_speed_times_curvature():
 
 def test_the_centre_is_handled_explicitly():
     assert g.field_direction(0.0, 0.0, RD, 0.5) == (1.0, 0.0)
-    course, rate = g.field_course(0.0, 0.0, 3.0, 4.0, RD, 0.5)
+    course, rate = g.field_course(0.0, 0.0, 3.0, 4.0, FieldParams(RD, 0.5))
     assert course == pytest.approx(math.atan2(3.0, 4.0))
     assert rate == 0.0
     # just off the centre the field points outward
@@ -135,7 +139,7 @@ def test_bad_input_is_rejected_everywhere():
     with pytest.raises(ValueError, match="speed_m_s"):
         g.optimal_c(RD, math.nan, 0.2)
     with pytest.raises(ValueError, match="course_rad"):
-        g.course_command(math.inf, 0.0, 0.0, 1.0, 0.2)
+        gc.course_command(math.inf, 0.0, 0.0, CourseLoop(1.0, 0.2))
     with pytest.raises(ValueError, match="r_m"):
         g.curvature(-1.0, RD, 1.0)
 
@@ -245,19 +249,21 @@ def test_optimal_c_when_the_circle_itself_is_too_tight():
 def test_feed_forward_course_error_decays_at_rate_k():
     k, w = 1.0, 0.2
     course, field_course, field_rate = 0.3, 0.35, -0.05
-    cmd = g.course_command(course, field_course, field_rate, k, w)
+    cmd = gc.course_command(course, field_course, field_rate, CourseLoop(k, w))
     rate = k * wrap_pi(cmd - course)
     # de/dt = field_rate - rate = -k e
     assert field_rate - rate == pytest.approx(-k * (field_course - course))
-    plain = g.course_command(course, field_course, field_rate, k, w, feed_forward=False)
+    plain = gc.course_command(
+        course, field_course, field_rate, CourseLoop(k, w, feed_forward=False)
+    )
     assert plain == pytest.approx(field_course)
 
 
 def test_course_command_implied_rate_is_within_the_limit_and_turns_the_short_way():
     k, w = 1.0, 0.2
-    cmd = g.course_command(0.0, 3.0, 0.1, k, w)
+    cmd = gc.course_command(0.0, 3.0, 0.1, CourseLoop(k, w))
     assert cmd == pytest.approx(w / k)
-    cmd = g.course_command(0.0, -3.0, 0.0, k, w)
+    cmd = gc.course_command(0.0, -3.0, 0.0, CourseLoop(k, w))
     assert cmd == pytest.approx(-w / k)
 
 
@@ -265,23 +271,33 @@ def test_course_command_implied_rate_is_within_the_limit_and_turns_the_short_way
 
 
 def test_switch_rule_hysteresis():
-    assert g.inverse_field_wanted(False, -0.1)
-    assert not g.inverse_field_wanted(False, 0.2)
-    assert g.inverse_field_wanted(True, 0.2)  # not yet far enough to go back
-    assert not g.inverse_field_wanted(True, 0.6)
+    assert gc.inverse_field_wanted(False, -0.1)
+    assert not gc.inverse_field_wanted(False, 0.2)
+    assert gc.inverse_field_wanted(True, 0.2)  # not yet far enough to go back
+    assert not gc.inverse_field_wanted(True, 0.6)
 
 
 def test_prediction_sees_the_crossing_of_simulation_b_and_not_of_simulation_a():
+    loop = CourseLoop(1.0, 0.2)
     c = g.optimal_c(300.0, 18.0, 0.2)
     # sim-b: 300 m east, 300 m north, heading south at 18 m/s
     # (the prediction stops as soon as it is inside, so it is only known to be negative)
-    assert g.predict_min_distance_error(300.0, 300.0, math.pi, 18.0, 300.0, c, 1.0, 0.2) < 0.0
+    assert (
+        gc.predict_min_distance_error(300.0, 300.0, math.pi, 18.0, FieldParams(300.0, c), loop)
+        < 0.0
+    )
     # sim-a: 600, 600 heading at the target: joins without crossing
     assert (
-        g.predict_min_distance_error(600.0, 600.0, -0.75 * math.pi, 18.0, 300.0, c, 1.0, 0.2) > -0.5
+        gc.predict_min_distance_error(
+            600.0, 600.0, -0.75 * math.pi, 18.0, FieldParams(300.0, c), loop
+        )
+        > -0.5
     )
     # Frew's field from sim-b crosses too (the paper's Fig. 11)
-    assert g.predict_min_distance_error(300.0, 300.0, math.pi, 18.0, 300.0, 2.0, 1.0, 0.2) < 0.0
+    assert (
+        gc.predict_min_distance_error(300.0, 300.0, math.pi, 18.0, FieldParams(300.0, 2.0), loop)
+        < 0.0
+    )
 
 
 # ---------------------------------------------------------------- moving target (eq. 15)
@@ -297,7 +313,7 @@ def test_prediction_sees_the_crossing_of_simulation_b_and_not_of_simulation_a():
 )
 def test_moving_target_velocity_is_within_limits(angle, tx, ty, s, relative):
     dx, dy = math.sin(angle), math.cos(angle)
-    gx, gy, lam, held = g.moving_target_velocity(dx, dy, tx, ty, s, 13.0, 25.0, relative)
+    gx, gy, lam, held = gm.moving_target_velocity(dx, dy, tx, ty, s, 13.0, 25.0, relative)
     speed = math.hypot(gx, gy)
     assert 13.0 - 1e-9 <= speed <= 25.0 + 1e-9
     assert lam >= 0.0
@@ -313,17 +329,17 @@ def test_moving_target_velocity_is_within_limits(angle, tx, ty, s, relative):
 
 def test_moving_target_relative_speed_is_eq_15():
     # target 5 m/s east, field due north: v_g = (5, 20) within limits, lambda = 20
-    gx, gy, lam, held = g.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0)
+    gx, gy, lam, held = gm.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0)
     assert (gx, gy, lam, held) == pytest.approx((5.0, 20.0, 20.0, False))
     # target 10 m/s along the field: 30 m/s would break the limit, so |v_g| = 25
-    gx, gy, lam, held = g.moving_target_velocity(0.0, 1.0, 0.0, 10.0, 20.0, 13.0, 25.0)
+    gx, gy, lam, held = gm.moving_target_velocity(0.0, 1.0, 0.0, 10.0, 20.0, 13.0, 25.0)
     assert (gx, gy, lam, held) == pytest.approx((0.0, 25.0, 15.0, True))
     # Frew's choice: the ground speed is 20
-    gx, gy, _, _ = g.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0, False)
+    gx, gy, _, _ = gm.moving_target_velocity(0.0, 1.0, 5.0, 0.0, 20.0, 13.0, 25.0, False)
     assert (gx, gy) == pytest.approx((5.0, math.sqrt(375.0)))
 
 
 def test_stationary_target_gives_the_field_itself():
     for relative in (True, False):
-        gx, gy, lam, _ = g.moving_target_velocity(0.6, 0.8, 0.0, 0.0, 20.0, 13.0, 25.0, relative)
+        gx, gy, lam, _ = gm.moving_target_velocity(0.6, 0.8, 0.0, 0.0, 20.0, 13.0, 25.0, relative)
         assert (gx, gy, lam) == pytest.approx((12.0, 16.0, 20.0))

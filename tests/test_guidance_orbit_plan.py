@@ -6,7 +6,6 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.core import guidance
 from app.core.agent import (
     AgentInputs,
     AgentParams,
@@ -17,6 +16,9 @@ from app.core.agent import (
     TargetInfo,
     agent_step,
 )
+from app.core.guidance import orbit_plan
+from app.core.guidance.field import FieldParams, field_course
+from app.core.guidance.orbit_plan import PlannedOrbit, ellipse_course_and_rate
 from app.core.plant import FixedWingState, VehicleEnvelope
 from app.runtime.fastsim import SimulationSetup, run_simulation
 from sitl.target import Maneuver, TargetPath
@@ -25,17 +27,17 @@ ENV = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
 
 
 def test_the_circle_is_kept_while_it_is_flyable():
-    assert guidance.planned_orbit_axes(90.0, 0.0, 10.0, 0.2) == (90.0, 90.0)
-    assert guidance.planned_orbit_axes(90.0, 3.0, 10.0, 0.2) == (90.0, 90.0)
+    assert orbit_plan.planned_orbit_axes(90.0, 0.0, 10.0, 0.2) == (90.0, 90.0)
+    assert orbit_plan.planned_orbit_axes(90.0, 3.0, 10.0, 0.2) == (90.0, 90.0)
 
 
 def test_a_fast_target_gets_a_flyable_ellipse_along_its_motion():
-    a, b = guidance.planned_orbit_axes(90.0, 7.0, 10.0, 0.2)
+    a, b = orbit_plan.planned_orbit_axes(90.0, 7.0, 10.0, 0.2)
     assert a > 90.0 >= b
-    need, _ = guidance._turn_need(np.float64(a), np.float64(b), 7.0, 10.0, np.linspace(0, 7, 400))
+    need, _ = orbit_plan._turn_need(np.float64(a), np.float64(b), 7.0, 10.0, np.linspace(0, 7, 400))
     assert need <= 0.2 + 1e-3
     # the circle itself is not flyable at that speed
-    need_circle, _ = guidance._turn_need(
+    need_circle, _ = orbit_plan._turn_need(
         np.float64(90.0), np.float64(90.0), 7.0, 10.0, np.linspace(0, 7, 400)
     )
     assert need_circle > 0.25
@@ -43,8 +45,10 @@ def test_a_fast_target_gets_a_flyable_ellipse_along_its_motion():
 
 def test_ellipse_field_with_equal_axes_is_the_ordinary_field():
     for x, y, vx, vy in ((120.0, -30.0, 3.0, 11.0), (-40.0, 60.0, -9.0, 2.0)):
-        ref = guidance.field_course(x, y, vx, vy, 90.0, 0.34)
-        got = guidance.ellipse_course_and_rate(x, y, vx, vy, 90.0, 0.34, 1, 0.6, 0.8, 90.0, 90.0)
+        ref = field_course(x, y, vx, vy, FieldParams(90.0, 0.34))
+        got = ellipse_course_and_rate(
+            x, y, vx, vy, FieldParams(90.0, 0.34), PlannedOrbit(90.0, 90.0, 0.6, 0.8)
+        )
         assert math.isclose(math.remainder(got[0] - ref[0], math.tau), 0.0, abs_tol=1e-9)
         assert math.isclose(got[1], ref[1], rel_tol=1e-9, abs_tol=1e-12)
 
@@ -52,6 +56,7 @@ def test_ellipse_field_with_equal_axes_is_the_ordinary_field():
 def test_on_the_ellipse_the_field_is_its_tangent_and_the_rate_is_exact():
     a, b, c = 110.0, 80.0, 0.34
     ux, uy = 0.0, 1.0  # the target moves north: the major axis points north
+    field, orbit = FieldParams(90.0, c), PlannedOrbit(a, b, ux, uy)
     for t in np.linspace(0.1, 6.2, 9):
         # along u: a cos t, across (w = west): b sin t
         pu, pw = a * math.cos(t), b * math.sin(t)
@@ -61,14 +66,14 @@ def test_on_the_ellipse_the_field_is_its_tangent_and_the_rate_is_exact():
         norm = math.hypot(tx, ty)
         speed = 12.0
         vx, vy = speed * tx / norm, speed * ty / norm
-        course, rate = guidance.ellipse_course_and_rate(x, y, vx, vy, 90.0, c, 1, ux, uy, a, b)
+        course, rate = ellipse_course_and_rate(x, y, vx, vy, field, orbit)
         assert math.isclose(
             math.remainder(course - math.atan2(vx, vy), math.tau), 0.0, abs_tol=1e-9
         )
         # rate: the tangent's course change along the ellipse, numerically
         h = 1e-4
         x2, y2 = x + vx * h, y + vy * h
-        c2, _ = guidance.ellipse_course_and_rate(x2, y2, vx, vy, 90.0, c, 1, ux, uy, a, b)
+        c2, _ = ellipse_course_and_rate(x2, y2, vx, vy, field, orbit)
         assert math.isclose(
             math.remainder(c2 - course, math.tau) / h, rate, rel_tol=1e-3, abs_tol=1e-6
         )

@@ -1,5 +1,6 @@
 """Latency compensation (``agent.predict_own``, ``MissionAgentParams.latency_s``) and the flyable
-speed along an orbit around a moving target (``guidance.orbit_speed_profile`` / ``_cap``)."""
+speed along an orbit around a moving target (``guidance.orbit_plan.orbit_speed_profile`` and
+``orbit_speed_cap``)."""
 
 import functools
 import math
@@ -13,7 +14,6 @@ from hypothesis import strategies as st
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.core import guidance
 from app.core.agent import (
     AgentInputs,
     AgentParams,
@@ -25,6 +25,7 @@ from app.core.agent import (
     agent_step,
     predict_own,
 )
+from app.core.guidance import orbit_plan
 from app.core.plant import FixedWingState, VehicleEnvelope, step
 from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
@@ -117,36 +118,37 @@ def test_compensating_the_hold_alone_tracks_better_within_the_limits() -> None:
 
 
 def test_a_still_target_leaves_the_whole_speed_range() -> None:
-    assert set(guidance.orbit_speed_profile(90.0, 90.0, 0.0, 10.0, 18.0, 0.2)) == {18.0}
+    assert set(orbit_plan.orbit_speed_profile(90.0, 90.0, 0.0, 10.0, 18.0, 0.2)) == {18.0}
 
 
 def test_against_a_3_m_s_target_the_speed_is_capped_at_the_closed_form() -> None:
     """Flying against a target at v_t on the circle r_d at ground speed g, the relative speed is
     g + v_t and the course turns at (g + v_t)^2 / (r_d g): within W up to the larger root of
     g^2 + (2 v_t - W r_d) g + v_t^2 = 0, 11.196 m/s for 3 m/s, r_d = 90 m, W = 0.2 rad/s."""
-    profile = guidance.orbit_speed_profile(90.0, 90.0, 3.0, 10.0, 18.0, 0.2)
+    profile = orbit_plan.orbit_speed_profile(90.0, 90.0, 3.0, 10.0, 18.0, 0.2)
     p = 2 * 3.0 - 0.2 * 90.0
     root = (-p + math.sqrt(p * p - 4 * 9.0)) / 2
     # s = pi/2: the point across the motion on the left, where a ccw orbit flies against it
     upwind = profile[len(profile) // 4]
-    assert upwind == pytest.approx(root, abs=guidance.PROFILE_SPEED_STEP_M_S)
+    assert upwind == pytest.approx(root, abs=orbit_plan.PROFILE_SPEED_STEP_M_S)
     assert upwind <= root
     # flying with the target the whole range is flyable
     assert profile[3 * len(profile) // 4] == 18.0
 
 
 def test_an_orbit_beyond_the_turn_rate_at_any_speed_gets_the_minimum_speed() -> None:
-    profile = guidance.orbit_speed_profile(90.0, 90.0, 7.0, 10.0, 18.0, 0.2)
+    profile = orbit_plan.orbit_speed_profile(90.0, 90.0, 7.0, 10.0, 18.0, 0.2)
     assert min(profile) == 10.0
 
 
 def test_the_cap_brakes_ahead_of_the_slow_part_and_mirrors_for_clockwise() -> None:
-    profile = guidance.orbit_speed_profile(90.0, 90.0, 3.0, 10.0, 18.0, 0.2)
+    profile = orbit_plan.orbit_speed_profile(90.0, 90.0, 3.0, 10.0, 18.0, 0.2)
     brake = 0.3  # m/s^2
 
     def cap(x: float, y: float, sign: int = 1) -> float:
         # target moving east at 3 m/s; relative speed 14 m/s
-        return guidance.orbit_speed_cap(x, y, 14.0, sign, 1.0, 0.0, 90.0, 90.0, profile, brake)
+        orbit = orbit_plan.PlannedOrbit(90.0, 90.0, 1.0, 0.0)
+        return orbit_plan.orbit_speed_cap(x, y, 14.0, sign, orbit, profile, brake)
 
     # counter-clockwise: the north side flies against the target; the east side reaches it a
     # quarter orbit later (141 m at 14 m/s: 10.1 s), the south side half an orbit later

@@ -5,7 +5,7 @@ import re
 import pytest
 
 from app.cli import main
-from app.core.guidance import optimal_c
+from app.core.guidance.field import optimal_c
 
 
 @pytest.mark.parametrize(

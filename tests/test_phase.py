@@ -6,8 +6,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from app.core import guidance, phase
+from app.core import phase
 from app.core.frames import TAU
+from app.core.guidance import field
 
 angles = st.floats(min_value=-10.0, max_value=10.0, allow_nan=False)
 
@@ -105,14 +106,14 @@ def test_arc_shift_ramps_then_holds():
 
 def test_arrival_phase_lead_matches_flying_the_field():
     """Fly eq. (4) from r0 and compare theta - s t / r_d at the circle with Phi(r0)."""
-    rd, s, c = 400.0, 20.0, guidance.optimal_c(400.0, 20.0, 0.2)
+    rd, s, c = 400.0, 20.0, field.optimal_c(400.0, 20.0, 0.2)
     r0 = 1500.0
     r, theta, t, dt = r0, 0.0, 0.0, 0.005
     while r - rd > 1e-3:
-        r_dot, _ = guidance.field_polar_rates(r, rd, c, s)
+        r_dot, _ = field.field_polar_rates(r, rd, c, s)
         # midpoint step
         rm = r + 0.5 * dt * r_dot
-        r_dot_m, rtd_m = guidance.field_polar_rates(rm, rd, c, s)
+        r_dot_m, rtd_m = field.field_polar_rates(rm, rd, c, s)
         r += dt * r_dot_m
         theta += dt * rtd_m / rm
         t += dt

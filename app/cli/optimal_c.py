@@ -4,7 +4,7 @@ import argparse
 import math
 import time
 
-from app.core.guidance import optimal_c, peak_curvature
+from app.core.guidance.field import optimal_c, peak_curvature
 from app.errors import ConfigError
 
 ORDER = 50

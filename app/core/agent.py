@@ -12,8 +12,23 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
-from app.core import guidance, phase, plant
+from app.core import phase, plant
 from app.core.frames import wrap_pi
+from app.core.guidance.course import (
+    CourseLoop,
+    course_command,
+    inverse_field_wanted,
+    predict_min_distance_error,
+)
+from app.core.guidance.field import FieldParams, course_and_rate, optimal_c, peak_curvature
+from app.core.guidance.moving_target import moving_target_velocity_unchecked
+from app.core.guidance.orbit_plan import (
+    PlannedOrbit,
+    ellipse_course_and_rate,
+    orbit_speed_cap,
+    orbit_speed_profile,
+    planned_orbit_axes,
+)
 from app.core.plant import VehicleEnvelope, require_positive
 
 GuidanceLaw = Literal["proposed", "frew", "fixed"]
@@ -31,7 +46,7 @@ class GuidanceParams:
 
     ``law``: ``proposed`` (optimal c, section 4.1, recomputed as speed changes, with the ILVF
     switch), ``frew`` (c = 2) or ``fixed`` (c = ``c``). ``feed_forward``: lag compensation of the
-    course command (``guidance.course_command``); False is the paper's literal eq. (2) loop.
+    course command (``guidance.course.course_command``); False is the paper's literal eq. (2) loop.
     ``curvature_margin``: fraction of the course-rate limit the optimal c may use.
     ``inverse_field``: the ILVF switch (default: on for ``proposed`` only).
     ``relative_speed``: with a moving target, the speed command is the speed relative to the
@@ -39,11 +54,11 @@ class GuidanceParams:
     ``orbit_plan``: ``circle`` (the paper's: the field converges to the circle r_d around the
     target whatever its speed) or ``ellipse`` (improvement: around a target too fast for the
     circle, the field converges to the flyable ellipse closest to it, aligned with the target's
-    velocity; ``guidance.planned_orbit_axes`` with ``plan_margin`` of the course-rate limit and
+    velocity; ``orbit_plan.planned_orbit_axes`` with ``plan_margin`` of the course-rate limit and
     semi-axes within ``plan_max_stretch`` r_d of r_d; the circle while it is flyable).
     ``speed_cap`` (improvement): around a moving target, the ground speed is capped where the
     orbit (the circle, or the planned one) would need more than ``speed_cap_margin`` of the
-    course-rate limit at the speed the phase law wants (``guidance.orbit_speed_cap``: flying
+    course-rate limit at the speed the phase law wants (``orbit_plan.orbit_speed_cap``: flying
     against the target's motion, e.g. at most 11.2 m/s on the 90 m circle around a 3 m/s
     target), braking ahead of such a place at ``speed_cap_brake`` of the envelope's acceleration.
     """
@@ -305,9 +320,7 @@ def _guidance_c(state: AgentState, params: AgentParams, speed_m_s: float) -> Age
         if design_speed == state.c_speed_m_s and state.c_law == g.law:
             return state
         env = params.envelope
-        c = guidance.optimal_c(
-            g.radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin
-        )
+        c = optimal_c(g.radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin)
         return replace(state, c=c, c_speed_m_s=design_speed, c_law=g.law)
     if c == state.c and state.c_speed_m_s > 0.0 and state.c_law == g.law:
         return state
@@ -360,14 +373,15 @@ def agent_step(
        speed has moved by ``c_update_speed_step_m_s``), 2 for Frew's field, or the fixed c.
     2. ILVF switch (law ``proposed``): every ``switch_check_period_s``, outside the circle,
        predict the smallest r - r_d of flying the ordinary field from here
-       (``guidance.predict_min_distance_error``) and apply ``guidance.inverse_field_wanted``.
+       (``guidance.course.predict_min_distance_error``) and apply
+       ``guidance.course.inverse_field_wanted``.
        Inside the circle the ordinary field (which leads out to it) is always flown. The check
        is skipped when it cannot matter: far outside (> 2.2 turn radii) or already aligned with a
        flyable field.
     3. Speed: cruise, or the phase law's speed (eq. 27) from the team's phases.
     4. Course: the field direction in the target's frame (eq. 8/14), corrected for the target's
        motion (eq. 15) to a ground velocity at the commanded speed, and lag-compensated with the
-       ground course's own rate (``guidance.course_command``).
+       ground course's own rate (``guidance.course.course_command``).
 
     Parameters
     ----------
@@ -434,9 +448,8 @@ def agent_step(
             rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed, max_speed
         )
 
-    cmd_course = guidance._course_command(
-        own.course_rad, ground_course, ground_rate, k, w, g.feed_forward
-    )
+    loop = CourseLoop(k, w, g.feed_forward)
+    cmd_course = course_command(own.course_rad, ground_course, ground_rate, loop)
     command = Command(
         course_rad=cmd_course,
         speed_m_s=speed_cmd,
@@ -475,16 +488,16 @@ def _switch_rule(
             if r - rd > 2.2 * turn_radius:
                 skip = True
             else:
-                f_course, _ = guidance._course_and_rate(x, y, vx, vy, rd, c, sign, False)
-                flyable = guidance.peak_curvature(rd, c)[0] <= w / rel_speed * (1.0 + 1e-9)
+                f_course, _ = course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign))
+                flyable = peak_curvature(rd, c)[0] <= w / rel_speed * (1.0 + 1e-9)
                 skip = flyable and abs(wrap_pi(f_course - rel_course)) < 0.01
         if skip:
             wanted = False
         else:
-            predicted = guidance.predict_min_distance_error(
-                x, y, rel_course, rel_speed, rd, c, k, w, sign, g.feed_forward
-            )
-            wanted = guidance.inverse_field_wanted(
+            field_params = FieldParams(rd, c, sign)
+            loop = CourseLoop(k, w, g.feed_forward)
+            predicted = predict_min_distance_error(x, y, rel_course, rel_speed, field_params, loop)
+            wanted = inverse_field_wanted(
                 using_inverse, predicted, g.switch_enter_below_m, g.switch_leave_above_m
             )
     mode: FieldMode = "inverse" if wanted else "field"
@@ -505,10 +518,10 @@ def _ground_course(
     max_speed_m_s: float,
 ) -> tuple[float, float, float]:
     """Eq. (15): ground velocity v_g = v_t + lambda d for the commanded speed
-    (``guidance.moving_target_velocity``), its course and the course's rate (d turning at
-    ``rel_rate``, the target accelerating; lambda or |v_g| held constant)."""
+    (``moving_target.moving_target_velocity``), its course and the course's rate (d turning
+    at ``rel_rate``, the target accelerating; lambda or |v_g| held constant)."""
     dx, dy = math.sin(rel_course), math.cos(rel_course)
-    gx, gy, lam, held = guidance._moving_target_velocity(
+    gx, gy, lam, held = moving_target_velocity_unchecked(
         dx,
         dy,
         tgt.v_east_m_s,
@@ -533,7 +546,7 @@ def _ground_course(
         return rel_course, 0.0, env.min_speed_m_s
     course = math.atan2(gx, gy)
     rate = (gy * ax - gx * ay) / g2
-    # (clamped again only against rounding: _moving_target_velocity already scaled it in)
+    # (clamped again only against rounding: the velocity was already scaled it in)
     return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), max_speed_m_s)
 
 
@@ -542,7 +555,7 @@ def _orbit_axes(speed_m_s: float, params: AgentParams) -> tuple[float, float]:
     at ``speed_m_s``: the planned one with ``orbit_plan = "ellipse"``, else the circle."""
     g, env = params.guidance, params.envelope
     if g.orbit_plan == "ellipse" and speed_m_s >= 0.5:
-        return guidance.planned_orbit_axes(
+        return planned_orbit_axes(
             g.radius_m,
             speed_m_s,
             env.min_speed_m_s,
@@ -560,7 +573,7 @@ def _speed_cap(x: float, y: float, rel_speed: float, tgt: TargetInfo, params: Ag
     if speed < 0.1:
         return env.max_speed_m_s
     a, b = _orbit_axes(speed, params)
-    profile = guidance.orbit_speed_profile(
+    profile = orbit_speed_profile(
         a,
         b,
         speed,
@@ -568,18 +581,9 @@ def _speed_cap(x: float, y: float, rel_speed: float, tgt: TargetInfo, params: Ag
         env.max_speed_m_s,
         g.speed_cap_margin * env.max_course_rate_rad_s,
     )
-    cap = guidance.orbit_speed_cap(
-        x,
-        y,
-        rel_speed,
-        g.orbit_sign,
-        tgt.v_east_m_s / speed,
-        tgt.v_north_m_s / speed,
-        a,
-        b,
-        profile,
-        g.speed_cap_brake * env.max_accel_m_s2,
-    )
+    orbit = PlannedOrbit(a, b, tgt.v_east_m_s / speed, tgt.v_north_m_s / speed)
+    brake = g.speed_cap_brake * env.max_accel_m_s2
+    cap = orbit_speed_cap(x, y, rel_speed, g.orbit_sign, orbit, profile, brake)
     return min(max(cap, env.min_speed_m_s), env.max_speed_m_s)
 
 
@@ -594,7 +598,7 @@ def _relative_course(
     params: AgentParams,
 ) -> tuple[float, float]:
     """Course and rate of the field in the target's frame: the paper's circle, or (``orbit_plan
-    = "ellipse"``) the planned orbit around the target (``guidance.planned_orbit_axes``: the
+    = "ellipse"``) the planned orbit around the target (``orbit_plan.planned_orbit_axes``: the
     circle while it is flyable, else the flyable ellipse closest to it, aligned with the
     target's velocity)."""
     g = params.guidance
@@ -604,5 +608,6 @@ def _relative_course(
         a, b = _orbit_axes(speed, params)
         if a != b:
             ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
-            return guidance.ellipse_course_and_rate(x, y, vx, vy, rd, c, sign, ux, uy, a, b)
-    return guidance._course_and_rate(x, y, vx, vy, rd, c, sign, inverse)
+            orbit = PlannedOrbit(a, b, ux, uy)
+            return ellipse_course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign), orbit)
+    return course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign, inverse))

@@ -89,11 +89,14 @@ def step(
     wind_east_m_s: float = 0.0,
     wind_north_m_s: float = 0.0,
     hold_envelope: bool = True,
+    exact_arc: bool = True,
 ) -> FixedWingState:
     """Advance eq. (2) by ``dt_s`` under a (course, speed) command.
 
     The course rate k * wrap(course_cmd - course) is saturated at the course-rate limit and held
-    over the step; position integrates the resulting arc exactly (with the step's mean speed).
+    over the step; position integrates the resulting arc exactly (with the step's mean speed),
+    or with ``exact_arc=False`` along the chord at the mid-step course (the midpoint rule, which
+    the guidance's coarse 0.1 s prediction of the closed loop uses).
     The speed command is clamped to the speed limits and approached at most at the acceleration
     limit, never past it. With ``hold_envelope`` the speed is also kept within the limits
     (physics: the airframe cannot fly outside them); without it a speed that starts outside them
@@ -122,7 +125,7 @@ def step(
     course0 = state.course_rad
     course1 = course0 + rate * dt_s
     turn = rate * dt_s
-    if abs(turn) > 1e-9:
+    if exact_arc and abs(turn) > 1e-9:
         # exact arc: integral of (sin, cos)(course0 + rate t) over the step
         d_east = mean_speed * (math.cos(course0) - math.cos(course1)) / rate
         d_north = mean_speed * (math.sin(course1) - math.sin(course0)) / rate
