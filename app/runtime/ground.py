@@ -22,7 +22,6 @@ from app.runtime.ports.bus import Bus, Subscription
 from app.runtime.ports.events import EventSink
 from app.runtime.ports.view import MissionSnapshot, VehicleRow
 from app.runtime.wire import global_to_bus, local_to_core
-from sitl.target import TargetPath
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +45,7 @@ class SimulatedSensor:
     """Observations of the scripted target for vehicles without a camera (e.g. SITL autopilots):
     the true position plus Gaussian noise of ``sigma_m`` per axis, ``rate_hz`` per vehicle."""
 
-    def __init__(self, path: TargetPath, sigma_m: float, rate_hz: float, seed: int) -> None:
+    def __init__(self, path: logic.Truth, sigma_m: float, rate_hz: float, seed: int) -> None:
         if not (sigma_m > 0.0 and rate_hz > 0.0):
             raise ValueError("sigma_m and rate_hz must be > 0")
         self._path = path
@@ -108,7 +107,7 @@ class GroundStation:
         bus_client: Bus,
         events: EventSink,
         *,
-        truth: TargetPath | None = None,
+        truth: logic.Truth | None = None,
         sources: Sequence[TickSource] = (),
         external_observations: str | None = None,
         on_snapshot: Callable[[MissionSnapshot], None] | None = None,
