@@ -53,11 +53,13 @@ def course_command(
     ``loop`` holds k, W and whether the rate is fed forward. All angles are courses (rad,
     clockwise from north); the result is in [-pi, pi).
     """
-    check_finite(
-        course_rad=course_rad,
-        field_course_rad=field_course_rad,
-        field_course_rate_rad_s=field_course_rate_rad_s,
-    )
+    # a sum of finite floats is finite (short of overflow): name the culprit only when it is not
+    if not math.isfinite(course_rad + field_course_rad + field_course_rate_rad_s):
+        check_finite(
+            course_rad=course_rad,
+            field_course_rad=field_course_rad,
+            field_course_rate_rad_s=field_course_rate_rad_s,
+        )
     return _lead_command(course_rad, field_course_rad, field_course_rate_rad_s, loop)
 
 
