@@ -28,7 +28,7 @@ from app.core.estimation.messages import Observation
 from app.core.estimation.metrics import ErrorSeries, errors, nees_band
 from app.core.estimation.models import MotionModel
 from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
-from app.runtime.estimation_scenarios import ScenarioData
+from sitl.fixes import ScenarioData
 
 Row = tuple[float, float, float]  # position RMSE, turn position RMSE, velocity RMSE
 

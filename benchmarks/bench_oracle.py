@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2]
 
-For each seed the mission fast-sim (``app.runtime.mission_fastsim``, as ``bench_track``) flies
+For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
 speeds are handed to an optimiser that knows the target's whole future path exactly and flies
 ideal airframes: course rate within +-max_course_rate (no lag), |acceleration| <= max_accel,
@@ -44,12 +44,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize  # type: ignore[import-untyped]
 
+from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import MissionPlan, build_plan
 from app.core.frames import paper_angle_from_course
 from app.core.mission.team import TeamSample, VehicleSample
-from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 Array = NDArray[np.float64]
 BLIND_AFTER_S = 20.0  # how far past the segment's start the blind approach looks (straight on)

@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_track [CONFIG] [--seeds 1 2 3] [--latency-ticks 1]
       [--vary-command S] [--truth]
 
-Flies the whole mission (``app.runtime.mission_fastsim``: IMM-UKF per vehicle on a seeded
+Flies the whole mission (``app.compose.mission_fastsim``: IMM-UKF per vehicle on a seeded
 sigma^2 = 10 m^2 camera, the ground's fusion fed back, stages, 10 Hz control), with commands
 acting ``--latency-ticks`` control periods (0.1 s) late, once per variant of the track stage,
 all on the same seeds:
@@ -43,10 +43,10 @@ from typing import Any
 
 import numpy as np
 
+from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import MissionPlan, build_plan
-from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 HOLD_S = 0.1  # the control period: each command acts for one
 

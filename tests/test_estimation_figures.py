@@ -17,7 +17,7 @@ from app.config.estimator import load_estimator
 from app.config.scenario import EstimationScenarioConfig
 from app.core.estimation.metrics import ErrorSeries, errors, nees_band
 from app.core.estimation.pipeline import FederatedParams, run_centralised, run_federated
-from app.runtime.estimation_scenarios import ScenarioData, generate
+from sitl.fixes import ScenarioData, generate
 
 pytestmark = pytest.mark.slow
 

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
@@ -27,7 +28,6 @@ from app.core.agent import (
 )
 from app.core.guidance import orbit_plan
 from app.core.plant import FixedWingState, VehicleEnvelope, step
-from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 ENV = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
 

@@ -143,9 +143,14 @@ def test_runtime_imports_no_adapters_cli_config_report_or_sitl() -> None:
     assert not outside, _named(outside)
 
 
+def test_sitl_imports_only_sitl_and_the_pure_core() -> None:
+    outside = _violations("sitl", ("sitl", "app.core", "app.errors"))
+    assert not outside, _named(outside)
+
+
 def test_importing_the_mission_fast_simulation_loads_no_mavlink_or_mqtt() -> None:
     code = (
-        "import sys, app.runtime.mission_fastsim\n"
+        "import sys, app.compose.mission_fastsim\n"
         "print(sorted(m for m in ('mavsdk', 'aiomqtt', 'pymavlink') if m in sys.modules))\n"
     )
     out = subprocess.run(

@@ -43,6 +43,7 @@ import numpy as np
 import pytest
 
 from app.adapters.bus import InProcessBroker, InProcessBus
+from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import MissionPlan, build_plan, team_starts
@@ -52,7 +53,6 @@ from app.report.summary import summarize
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.fastsim import fly_team
 from app.runtime.ground import GroundRuntimeParams, GroundStation
-from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim
 from app.runtime.ports.vehicle import CourseSpeedCommand, TargetObservation, VehicleTelemetry
 from tests.fake_link import QueueLink, frame
 

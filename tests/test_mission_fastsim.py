@@ -5,10 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.mission_fastsim import MissionSimSetup, run_mission_sim, track_figures
 
 
 @pytest.fixture(scope="module")

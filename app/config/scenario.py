@@ -25,8 +25,8 @@ from app.config.schema import (
     VehicleStartConfig,
 )
 from app.core.agent import AgentParams, GuidanceParams, PhaseParams
-from app.runtime.estimation_scenarios import ScenarioData, SensorSpec, generate
 from app.runtime.fastsim import SimulationSetup
+from sitl.fixes import ScenarioData, SensorSpec, generate
 
 
 class ScenarioConfig(StrictModel):

@@ -1,4 +1,4 @@
-"""Seeded estimation scenarios: a target path's truth and noisy position fixes from n sensors.
+"""Seeded estimation scenarios: a scripted target's truth and noisy position fixes from n sensors.
 
 A scenario is a target path (``sitl.target.TargetPath``: the Fig. 12-like manoeuvre path or the
 section 5.2 A-B-C-D path, both described in ``configs/est-*.toml``) plus how the vehicles see

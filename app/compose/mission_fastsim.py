@@ -17,7 +17,8 @@ in the order the live mission does, carrying each outbox to where the bus would:
 
 Figures come from ``app.report.summary.summarize`` on the same ``TeamSample``s the ground
 station records (errors against the true target), so they read like a live run's
-``summary.json``.
+``summary.json``. It puts together a plan (config), the core, the runtime's stepping loop
+(``app.runtime.fastsim.fly_team``) and the report's summary, so it lives with the composition.
 """
 
 import math
