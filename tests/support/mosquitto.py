@@ -1,0 +1,117 @@
+"""A real mosquitto broker on a free loopback port, for tests and benchmarks.
+
+Tests get one from the ``mosquitto`` fixture (``tests/conftest.py``); ``Mosquitto.restart()``
+brings it back on the same port.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+START_TIMEOUT_S = 10.0
+
+
+def mosquitto_binary() -> str:
+    found = shutil.which("mosquitto") or (
+        "/usr/sbin/mosquitto" if os.access("/usr/sbin/mosquitto", os.X_OK) else None
+    )
+    if found is None:
+        raise RuntimeError("mosquitto is not installed (apt-get install mosquitto)")
+    return found
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+class Mosquitto:
+    """One mosquitto process with a generated config in ``workdir``."""
+
+    def __init__(
+        self, workdir: Path, *, extra_config: str = "", tls: bool = False, anonymous: bool = True
+    ) -> None:
+        self.workdir = workdir
+        self.anonymous = anonymous
+        self.extra_config = extra_config
+        self.tls = tls
+        self.port = free_port()
+        self.process: subprocess.Popen[bytes] | None = None
+        self.log_path = workdir / "mosquitto.log"
+
+    @property
+    def url(self) -> str:
+        return f"{'mqtts' if self.tls else 'mqtt'}://127.0.0.1:{self.port}"
+
+    def config(self) -> str:
+        return (
+            f"listener {self.port} 127.0.0.1\n"
+            f"allow_anonymous {'true' if self.anonymous else 'false'}\n"
+            "persistence false\n"
+            # as root, mosquitto would drop to the "mosquitto" user, who cannot read tmp_path
+            f"{'user root' if os.geteuid() == 0 else ''}\n"
+            "log_dest stderr\n"
+            "log_type error\nlog_type warning\nlog_type notice\n"
+            f"{self.extra_config}"
+        )
+
+    def start(self, *, keep_port: bool = False) -> None:
+        """Start and return once it accepts TCP connections.
+
+        A port lost to another process meanwhile is replaced by a new free one, unless
+        ``keep_port`` (a restart: the clients know this port), which tries the same port again.
+        """
+        for attempt in range(3):
+            conf = self.workdir / "mosquitto.conf"
+            conf.write_text(self.config(), encoding="utf-8")
+            with self.log_path.open("ab") as log:
+                self.process = subprocess.Popen(
+                    [mosquitto_binary(), "-c", str(conf)],
+                    stdout=subprocess.DEVNULL,
+                    stderr=log,
+                )
+            if self._wait_accepting():
+                return
+            self.stop()
+            lost_the_port = self.process is not None and self.process.returncode != 0
+            if attempt < 2 and lost_the_port and not keep_port:
+                self.port = free_port()  # lost a race for the port with another process
+        text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+        raise RuntimeError(f"mosquitto did not start on port {self.port}:\n{text[-2000:]}")
+
+    def _wait_accepting(self) -> bool:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        assert self.process is not None
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                return False
+            with (
+                contextlib.suppress(OSError),
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.5),
+            ):
+                return True
+            time.sleep(0.02)  # polling an external process: there is no event to await
+        return False
+
+    def stop(self) -> None:
+        if self.process is None or self.process.poll() is not None:
+            return
+        self.process.terminate()
+        try:
+            self.process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(timeout=5)
+
+    def restart(self) -> None:
+        """Stop and start again on the same port (clients see a broker restart)."""
+        self.stop()
+        self.start(keep_port=True)
