@@ -65,7 +65,7 @@ def main() -> None:
     if args.broker:
         mqtt_s, dropped = asyncio.run(_run(args.broker, n))
     else:
-        from tests.mosquitto import Mosquitto  # the test helper starts a throwaway broker
+        from tests.support.mosquitto import Mosquitto  # the test helper starts a throwaway broker
 
         with tempfile.TemporaryDirectory() as tmp:
             broker = Mosquitto(Path(tmp))

@@ -115,7 +115,7 @@ def broker_url(given: str | None, workdir: Path) -> Iterator[str]:
     if given is not None:
         yield given
         return
-    from tests.mosquitto import Mosquitto  # the test helper starts a throwaway broker
+    from tests.support.mosquitto import Mosquitto  # the test helper starts a throwaway broker
 
     broker = Mosquitto(workdir)
     broker.start()
