@@ -127,6 +127,29 @@ class AutopilotAdapter(Protocol):
         ...
 
 
+class OffboardControl:
+    """Start and stop of the adapters that fly MAVSDK offboard (velocity, PX4 fixed-wing): the
+    first setpoint, then offboard start; offboard stop leaves the vehicle in hold."""
+
+    __slots__ = ()
+    vehicle_id: int
+    offboard: OffboardPort
+
+    async def send(
+        self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
+    ) -> None:
+        raise NotImplementedError
+
+    async def start(
+        self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
+    ) -> None:
+        await self.send(setpoint, altitude_m, state)
+        await offboard_call("offboard start", self.vehicle_id, self.offboard.start())
+
+    async def stop(self) -> None:
+        await offboard_call("offboard stop (hold)", self.vehicle_id, self.offboard.stop())
+
+
 async def offboard_call(what: str, vehicle_id: int, call: Any) -> None:
     try:
         await call

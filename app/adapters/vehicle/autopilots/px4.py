@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from app.adapters.vehicle.autopilots.base import (
     AutopilotName,
     CommandPort,
+    OffboardControl,
     OffboardPort,
     ParamPort,
     VehicleState,
@@ -76,7 +77,7 @@ COM_OBL_RC_ACT_HOLD: Final = 5
 
 
 @dataclass(slots=True)
-class Px4FixedWingAdapter:
+class Px4FixedWingAdapter(OffboardControl):
     """PX4 fixed-wing: a point ``lookahead`` ahead on the course plus the course as velocity.
 
     PX4 flies a position + velocity setpoint as a line through the point along the velocity,
@@ -186,12 +187,6 @@ class Px4FixedWingAdapter:
         )
         self._speed_sent = speed_m_s
 
-    async def start(
-        self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
-    ) -> None:
-        await self.send(setpoint, altitude_m, state)
-        await offboard_call("offboard start", self.vehicle_id, self.offboard.start())
-
     async def send(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
@@ -202,6 +197,3 @@ class Px4FixedWingAdapter:
             self.offboard.set_position_velocity_ned(position, velocity),
         )
         await self._airspeed(setpoint.speed_m_s)
-
-    async def stop(self) -> None:
-        await offboard_call("offboard stop (hold)", self.vehicle_id, self.offboard.stop())

@@ -10,6 +10,7 @@ from mavsdk.plugins.offboard import VelocityNedYaw
 
 from app.adapters.vehicle.autopilots.base import (
     AutopilotName,
+    OffboardControl,
     OffboardPort,
     VehicleState,
     altitude_rate,
@@ -23,7 +24,7 @@ from app.runtime.ports.vehicle import CourseSpeedCommand
 
 
 @dataclass(slots=True)
-class VelocityAdapter:
+class VelocityAdapter(OffboardControl):
     """Velocity + yaw setpoints (SET_POSITION_TARGET_LOCAL_NED, resent by MAVSDK at 20 Hz).
 
     The horizontal velocity is the course at the commanded speed, the yaw is the course, and the
@@ -55,12 +56,6 @@ class VelocityAdapter:
         check_finite({"north": north, "east": east, "down": down, "yaw": yaw}, "velocity setpoint")
         return VelocityNedYaw(north_m_s=north, east_m_s=east, down_m_s=down, yaw_deg=yaw)
 
-    async def start(
-        self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
-    ) -> None:
-        await self.send(setpoint, altitude_m, state)
-        await offboard_call("offboard start", self.vehicle_id, self.offboard.start())
-
     async def send(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
@@ -68,6 +63,3 @@ class VelocityAdapter:
         await offboard_call(
             "velocity setpoint", self.vehicle_id, self.offboard.set_velocity_ned(value)
         )
-
-    async def stop(self) -> None:
-        await offboard_call("offboard stop (hold)", self.vehicle_id, self.offboard.stop())
