@@ -11,7 +11,6 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,32 +29,7 @@ from app.core.mission.stage import adjacent_phase_differences
 from app.core.phase import orbit_order, phase_time_lower_bound
 from app.core.plant import FixedWingState, VehicleEnvelope, step
 from app.core.sampled_run import FloatArray, SimulationResult
-
-
-class TargetMotionState(Protocol):
-    """The target at one instant (m, m/s, m/s^2), e.g. ``sitl.target.TargetState``."""
-
-    @property
-    def east_m(self) -> float: ...
-    @property
-    def north_m(self) -> float: ...
-    @property
-    def v_east_m_s(self) -> float: ...
-    @property
-    def v_north_m_s(self) -> float: ...
-    @property
-    def a_east_m_s2(self) -> float: ...
-    @property
-    def a_north_m_s2(self) -> float: ...
-
-
-class TargetMotion(Protocol):
-    """A target's scripted path (``sitl.target.TargetPath``): its state at any time; after
-    ``duration_s`` it keeps its last state."""
-
-    @property
-    def duration_s(self) -> float: ...
-    def state_at(self, t_s: float) -> TargetMotionState: ...
+from app.core.target import TargetMotion
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from app.core.mission import ground as logic
 from app.core.mission.team import TeamSample
+from app.core.target import TargetMotion
 from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus, Subscription
@@ -45,7 +46,7 @@ class SimulatedSensor:
     """Observations of the scripted target for vehicles without a camera (e.g. SITL autopilots):
     the true position plus Gaussian noise of ``sigma_m`` per axis, ``rate_hz`` per vehicle."""
 
-    def __init__(self, path: logic.Truth, sigma_m: float, rate_hz: float, seed: int) -> None:
+    def __init__(self, path: TargetMotion, sigma_m: float, rate_hz: float, seed: int) -> None:
         if not (sigma_m > 0.0 and rate_hz > 0.0):
             raise ValueError("sigma_m and rate_hz must be > 0")
         self._path = path
@@ -107,7 +108,7 @@ class GroundStation:
         bus_client: Bus,
         events: EventSink,
         *,
-        truth: logic.Truth | None = None,
+        truth: TargetMotion | None = None,
         sources: Sequence[TickSource] = (),
         external_observations: str | None = None,
         on_snapshot: Callable[[MissionSnapshot], None] | None = None,

@@ -17,7 +17,6 @@ is part of the state (``GroundState.ticks``, ``.announcements``).
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Protocol
 
 from app.core.estimation.federated import (
     MainParams,
@@ -33,6 +32,7 @@ from app.core.frames import TAU
 from app.core.mission.schedule import Every
 from app.core.mission.stage import Stage, StageParams, StageState, TeamView, next_stage
 from app.core.mission.team import TeamSample, VehicleSample, dead_reckon
+from app.core.target import TargetMotion
 
 
 @dataclass(frozen=True, slots=True)
@@ -241,26 +241,6 @@ def initial_ground_state(tick_period_s: float = 0.1, mission_period_s: float = 0
     return GroundState(ticks=Every(tick_period_s), announcements=Every(mission_period_s))
 
 
-class TruthState(Protocol):
-    """The true target at one instant (m, m/s), e.g. ``sitl.target.TargetState``."""
-
-    @property
-    def east_m(self) -> float: ...
-    @property
-    def north_m(self) -> float: ...
-    @property
-    def v_east_m_s(self) -> float: ...
-    @property
-    def v_north_m_s(self) -> float: ...
-
-
-class Truth(Protocol):
-    """A scripted target known to the station (``sitl.target.TargetPath``), to score against."""
-
-    def state_at(self, t_s: float) -> TruthState: ...
-    def segment_at(self, t_s: float) -> str: ...
-
-
 @dataclass(frozen=True, slots=True)
 class HeardStatuses:
     """The newest statuses of one or more vehicles, heard at once."""
@@ -303,7 +283,7 @@ _EMPTY = GroundOutbox()
 
 
 def step(
-    state: GroundState, event: GroundInput, params: GroundParams, truth: Truth | None = None
+    state: GroundState, event: GroundInput, params: GroundParams, truth: TargetMotion | None = None
 ) -> tuple[GroundState, GroundOutbox]:
     """Deliver one input to the station; statuses that take mission time to the next tick
     run it (``tick``). Samples are scored against ``truth`` when given, else the orbit is
@@ -341,7 +321,7 @@ def estimate_at(
 
 
 def team_sample(
-    state: GroundState, t_s: float, params: GroundParams, truth: Truth | None = None
+    state: GroundState, t_s: float, params: GroundParams, truth: TargetMotion | None = None
 ) -> TeamSample | None:
     """The team at ``t_s`` (each vehicle dead-reckoned from its newest report) and the target:
     the true one when ``truth`` is given, else the estimate (None before there is one)."""
