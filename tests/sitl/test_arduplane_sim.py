@@ -323,6 +323,24 @@ def test_long_failsafe_action_by_mode_follows_failsafe_long_on_event():
 
 
 @pytest.mark.slow
+async def test_arduplane_joined_between_heartbeats_is_still_flown_as_arduplane():
+    """ArduPlane sends HEARTBEAT at 1 Hz and its other streams faster: a link opened while the
+    vehicle is already streaming sees it before its first heartbeat, when MAVSDK still reports a
+    generic autopilot (the velocity form, whose NAV_TAKEOFF ArduPlane refuses). The link waits
+    for the heartbeat before it chooses."""
+    config = sim_config(1, speedup=1.0, autopilot="arduplane")
+    async with asyncio.timeout(30.0), running_sim(config) as sim:
+        await asyncio.sleep(2.5)  # streaming for a while: the link joins between heartbeats
+        for _ in range(3):
+            await asyncio.sleep(0.35)  # a different place in the heartbeat period each time
+            async with (
+                MavsdkHub(urls_of(sim), origin_of(sim)) as hub,
+                hub.link(1, LinkConfig(LIMITS)) as link,
+            ):
+                assert link.autopilot_name == "arduplane"
+
+
+@pytest.mark.slow
 async def test_arduplane_adapter_is_chosen_takes_off_flies_courses_and_stops_in_loiter():
     config = sim_config(1, speedup=SPEEDUP, autopilot="arduplane")
     async with asyncio.timeout(40.0), running_sim(config) as sim:

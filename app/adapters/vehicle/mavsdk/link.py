@@ -27,6 +27,7 @@ from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+from mavsdk.autopilot import Autopilot
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
@@ -60,6 +61,10 @@ from app.runtime.ports.vehicle import (
 log = logging.getLogger(__name__)
 
 
+#: what MAVSDK reports before it has heard the autopilot's HEARTBEAT
+GENERIC_AUTOPILOTS: tuple[Autopilot, ...] = (Autopilot.GENERIC, Autopilot.UNKNOWN)
+
+
 @dataclass(frozen=True, slots=True)
 class LinkConfig:
     """How one vehicle link behaves.
@@ -74,6 +79,10 @@ class LinkConfig:
     failsafe return the aircraft (False: leave SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN alone).
     ``arduplane_airspeed_check``: on ArduPlane, refuse a vehicle whose AIRSPEED_MIN..MAX does
     not hold the mission's speeds (False: do not read them).
+    ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
+    found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
+    at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
+    the adapter.
     """
 
     limits: SetpointLimits
@@ -90,9 +99,16 @@ class LinkConfig:
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
+    heartbeat_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("link_timeout_s", "mode_confirm_timeout_s", "hold_timeout_s", "clock_reset_s"):
+        for name in (
+            "link_timeout_s",
+            "mode_confirm_timeout_s",
+            "hold_timeout_s",
+            "clock_reset_s",
+            "heartbeat_timeout_s",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -210,6 +226,10 @@ class MavsdkVehicleLink:
                 self._param = ParamAsync(self._system)
                 autopilot = await self._system.autopilot_type()
                 vehicle = await self._system.vehicle_type()
+                if self._config.autopilot is None and autopilot in GENERIC_AUTOPILOTS:
+                    await self._first_heartbeat()
+                    autopilot = await self._system.autopilot_type()
+                    vehicle = await self._system.vehicle_type()
             except (MavsdkError, RuntimeError) as exc:
                 raise LinkError(f"vehicle {self._id}: cannot open its plugins: {exc}") from exc
             name = choose_autopilot(autopilot, vehicle, self._config.autopilot, self._id)
@@ -317,6 +337,26 @@ class MavsdkVehicleLink:
             raise LinkError(f"vehicle {self._id}: {what} within {timeout_s} s") from exc
 
     # -- readers (tasks) -------------------------------------------------------------------
+
+    async def _first_heartbeat(self) -> None:
+        """Wait (``heartbeat_timeout_s`` at most) for the autopilot's first HEARTBEAT, by which
+        MAVSDK knows which autopilot it is; on time-out the vehicle stays generic."""
+        try:
+            async with (
+                asyncio.timeout(self._config.heartbeat_timeout_s),
+                aclosing(self._direct.subscribe_message("HEARTBEAT")) as messages,
+            ):
+                async for message in messages:
+                    if message.component_id == self._config.autopilot_component_id:
+                        break
+            await asyncio.sleep(0)  # MAVSDK's own handler of the same message runs first
+        except TimeoutError:
+            log.warning(
+                "vehicle %d: no HEARTBEAT from its autopilot within %.1f s; it is taken for a "
+                "generic autopilot",
+                self._id,
+                self._config.heartbeat_timeout_s,
+            )
 
     async def _read_heartbeat(self) -> None:
         adapter = self._require_adapter()
