@@ -10,6 +10,7 @@ with defaults, so callers that do not know them keep working.
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Literal
 
 from app.core import phase, plant
@@ -153,10 +154,17 @@ class AgentParams:
     envelope: VehicleEnvelope
     guidance: GuidanceParams
     phase: PhaseParams = PhaseParams()
+    #: the course loop the guidance assumes (derived from ``envelope`` and ``guidance``)
+    course_loop: CourseLoop = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.index < 0:
             raise ValueError(f"AgentParams.index must be >= 0, got {self.index}")
+        env = self.envelope
+        loop = CourseLoop(
+            env.course_gain_per_s, env.max_course_rate_rad_s, self.guidance.feed_forward
+        )
+        object.__setattr__(self, "course_loop", loop)
 
 
 @dataclass(frozen=True, slots=True)
@@ -410,7 +418,6 @@ def agent_step(
     _check_inputs(inputs)
     env, g = params.envelope, params.guidance
     own, tgt = inputs.own, inputs.target
-    k, w = env.course_gain_per_s, env.max_course_rate_rad_s
     speed_now = own.speed_m_s if own.speed_m_s > 0.0 else env.cruise_speed_m_s
     new_state = _guidance_c(state, params, speed_now)
     c = new_state.c
@@ -448,8 +455,7 @@ def agent_step(
             rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed, max_speed
         )
 
-    loop = CourseLoop(k, w, g.feed_forward)
-    cmd_course = course_command(own.course_rad, ground_course, ground_rate, loop)
+    cmd_course = course_command(own.course_rad, ground_course, ground_rate, params.course_loop)
     command = Command(
         course_rad=cmd_course,
         speed_m_s=speed_cmd,
@@ -473,7 +479,7 @@ def _switch_rule(
 ) -> tuple[AgentState, tuple[AgentEvent, ...]]:
     g, env = params.guidance, params.envelope
     rd, sign = g.radius_m, g.orbit_sign
-    w, k = env.max_course_rate_rad_s, env.course_gain_per_s
+    w = env.max_course_rate_rad_s
     next_check = inputs.t_s + g.switch_check_period_s
     r = math.hypot(x, y)
     rel_speed = math.hypot(vx, vy)
@@ -488,15 +494,15 @@ def _switch_rule(
             if r - rd > 2.2 * turn_radius:
                 skip = True
             else:
-                f_course, _ = course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign))
+                f_course, _ = course_and_rate(x, y, vx, vy, _field(rd, c, sign, False))
                 flyable = peak_curvature(rd, c)[0] <= w / rel_speed * (1.0 + 1e-9)
                 skip = flyable and abs(wrap_pi(f_course - rel_course)) < 0.01
         if skip:
             wanted = False
         else:
-            field_params = FieldParams(rd, c, sign)
-            loop = CourseLoop(k, w, g.feed_forward)
-            predicted = predict_min_distance_error(x, y, rel_course, rel_speed, field_params, loop)
+            predicted = predict_min_distance_error(
+                x, y, rel_course, rel_speed, _field(rd, c, sign, False), params.course_loop
+            )
             wanted = inverse_field_wanted(
                 using_inverse, predicted, g.switch_enter_below_m, g.switch_leave_above_m
             )
@@ -609,5 +615,12 @@ def _relative_course(
         if a != b:
             ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
             orbit = PlannedOrbit(a, b, ux, uy)
-            return ellipse_course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign), orbit)
-    return course_and_rate(x, y, vx, vy, FieldParams(rd, c, sign, inverse))
+            return ellipse_course_and_rate(x, y, vx, vy, _field(rd, c, sign, False), orbit)
+    return course_and_rate(x, y, vx, vy, _field(rd, c, sign, inverse))
+
+
+@lru_cache(maxsize=64)
+def _field(radius_m: float, c: float, orbit_sign: int, inverse: bool) -> FieldParams:
+    """The (validated, immutable) field for these parameters, built once per c rather than on
+    every tick: c changes only when the speed moves by ``c_update_speed_step_m_s``."""
+    return FieldParams(radius_m, c, orbit_sign, inverse)

@@ -89,16 +89,24 @@ def fly_team(
     step_index = 0
     for tick in range(ticks + 1):
         t = tick * steps_per_tick * dt_s
-        pending.append((t, control(t, vehicles)))
-        if len(pending) > latency_ticks:
-            sent_t, held = pending.popleft()
+        commands = control(t, vehicles)
+        if latency_ticks == 0:
+            held = commands
             if applied is not None:
-                applied(sent_t, held, vehicles)
+                applied(t, held, vehicles)
+        else:
+            pending.append((t, commands))
+            if len(pending) > latency_ticks:
+                sent_t, held = pending.popleft()
+                if applied is not None:
+                    applied(sent_t, held, vehicles)
         if tick == ticks:
             break
+        if len(held) != len(vehicles):
+            raise ValueError(f"{len(held)} commands for {len(vehicles)} vehicles")
         for _ in range(steps_per_tick):
             vehicles = [
-                step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=True)
+                step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=False)
             ]
             step_index += 1
             if stepped is not None:
