@@ -66,12 +66,15 @@ class CourseSpeedCommand:
     """What guidance asks of a vehicle: a course (rad, clockwise from north) and a speed (m/s).
 
     ``altitude_m`` is the altitude above the vehicle's home (MAVLink relative altitude) to hold;
-    ``None`` keeps the altitude the vehicle had when offboard started.
+    ``None`` keeps the altitude the vehicle had when offboard started. ``course_rate_rad_s`` is
+    the rate at which the wanted ground course turns (rad/s, positive clockwise seen from above),
+    for adapters that can feed the path's curvature forward (PX4's offboard acceleration).
     """
 
     course_rad: float
     speed_m_s: float
     altitude_m: float | None = None
+    course_rate_rad_s: float = 0.0
 
     def __post_init__(self) -> None:
         _require_finite("course_rad", self.course_rad)
@@ -80,6 +83,7 @@ class CourseSpeedCommand:
             raise ValueError(f"speed_m_s must be >= 0, got {self.speed_m_s}")
         if self.altitude_m is not None:
             _require_finite("altitude_m", self.altitude_m)
+        _require_finite("course_rate_rad_s", self.course_rate_rad_s)
 
 
 @dataclass(frozen=True, slots=True)
