@@ -323,8 +323,10 @@ def estimate_at(
 def team_sample(
     state: GroundState, t_s: float, params: GroundParams, truth: TargetMotion | None = None
 ) -> TeamSample | None:
-    """The team at ``t_s`` (each vehicle dead-reckoned from its newest report) and the target:
-    the true one when ``truth`` is given, else the estimate (None before there is one)."""
+    """The team at ``t_s`` (each vehicle dead-reckoned from its newest report, at most
+    ``lost_after_s`` past it: a vehicle silent for longer is shown where it was last known, not
+    flown on for minutes) and the target: the true one when ``truth`` is given, else the
+    estimate (None before there is one)."""
     estimate = estimate_at(state, t_s, params)
     if truth is not None:
         true = truth.state_at(t_s)
@@ -341,7 +343,13 @@ def team_sample(
         VehicleSample(
             v,
             v in active,
-            *dead_reckon(r.east_m, r.north_m, r.course_rad, r.speed_m_s, t_s - r.t_s),
+            *dead_reckon(
+                r.east_m,
+                r.north_m,
+                r.course_rad,
+                r.speed_m_s,
+                min(t_s - r.t_s, params.lost_after_s),
+            ),
             r.speed_m_s,
             r.course_rad,
         )
