@@ -110,14 +110,31 @@ class EstimatorSettings(StrictModel):
 
 
 class LinkSettings(StrictModel):
-    """Vehicle links. Empty ``connect``: the built-in simulator on ``[sim]``'s ports."""
+    """Vehicle links. Empty ``connect``: the built-in simulator on ``[sim]``'s ports.
+
+    ``altitude_m`` + i * ``altitude_stack_m``: vehicle i's altitude above home, from take-off
+    to the end (vehicles apart vertically while they form up). Offboard/GUIDED is taken only
+    once the vehicle is above ``handover_min_height_m`` and at ``handover_min_airspeed_m_s``
+    (None: the envelope's min speed), within ``handover_timeout_s`` of its take-off.
+    ``clock_window_s``: the window (mission s) over which each vehicle's boot-clock offset is the
+    least host-minus-boot time.
+    """
 
     connect: list[str] = Field(default_factory=list)
     autopilot: Literal["auto", "velocity", "px4-fixed-wing", "arduplane"] = "auto"
     altitude_m: Finite = 100.0
+    altitude_stack_m: NonNegative = 35.0
     link_timeout_s: Positive = 2.0
     connect_timeout_s: Positive = 20.0
     take_off_timeout_s: Positive = 120.0
+    handover_min_height_m: NonNegative = 30.0
+    handover_min_airspeed_m_s: Positive | None = None
+    handover_timeout_s: Positive = 120.0
+    clock_window_s: Positive = 10.0
+
+    def vehicle_altitude_m(self, vehicle: int) -> float:
+        """Vehicle ``vehicle``'s (0-based) altitude above home (m)."""
+        return self.altitude_m + vehicle * self.altitude_stack_m
 
 
 class SimSettings(StrictModel):
