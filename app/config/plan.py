@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
-from app.core.agent import AgentParams, GuidanceParams, PhaseParams
+from app.core.agent import ActuatorChoice, AgentParams, GuidanceParams, PhaseParams
 from app.core.mission.agent import MissionAgentParams
 from app.core.mission.ground import GroundParams
 from app.core.mission.stage import StageParams
@@ -40,6 +40,13 @@ class MissionPlan:
     def count(self) -> int:
         return len(self.agents)
 
+    @property
+    def phase_actuator(self) -> ActuatorChoice:
+        """The phase actuator the file asks for (``auto``, ``speed`` or ``radius``); the plan's
+        agents fly ``auto`` as ``speed``. The runtime resolves it per vehicle from what its
+        autopilot honours: ``app.core.agent.resolve_actuator`` and ``with_phase_actuator``."""
+        return self.config.phase.actuator
+
 
 def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPlan:
     """Core parameters of every part; raises ConfigError when they do not fit together."""
@@ -57,7 +64,9 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             feed_forward=g.feed_forward,
             curvature_margin=g.curvature_margin,
         )
-        phase = PhaseParams(config.phase.law, config.phase.gain_per_s, config.phase.predictive)
+        # ``auto`` is ``speed`` here (the built-in simulator and the fast simulation honour a
+        # speed command); the runtime resolves it per vehicle (``phase_actuator``)
+        phase = config.phase.build(honours_speed=True)
         track_gain = config.phase.track_gain_per_s
         track_phase = phase if track_gain is None else replace(phase, gain_per_s=track_gain)
         track_guidance = replace(

@@ -24,7 +24,7 @@ from app.config.schema import (
     TargetConfig,
     VehicleStartConfig,
 )
-from app.core.agent import AgentParams, GuidanceParams, PhaseParams
+from app.core.agent import AgentParams, GuidanceParams
 from app.runtime.fastsim import SimulationSetup
 from sitl.fixes import ScenarioData, SensorSpec, generate
 
@@ -57,8 +57,8 @@ def build_setup(scenario: ScenarioConfig) -> SimulationSetup:
         feed_forward=g.feed_forward,
         curvature_margin=g.curvature_margin,
     )
-    p = scenario.phase
-    phase = PhaseParams(law=p.law, gain_per_s=p.gain_per_s, predictive=p.predictive)
+    # the fast simulation flies the commanded speed: ``auto`` is ``speed``
+    phase = scenario.phase.build(honours_speed=True)
     agents = tuple(
         AgentParams(index=i, envelope=envelope, guidance=guidance, phase=phase)
         for i in range(len(scenario.vehicles))

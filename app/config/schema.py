@@ -9,6 +9,7 @@ from typing import Annotated, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from app.core.agent import PhaseParams, resolve_actuator
 from app.core.plant import FixedWingState, VehicleEnvelope
 from sitl.target import Leg, Maneuver, TargetPath
 
@@ -182,8 +183,27 @@ class GuidanceConfig(StrictModel):
 class PhaseConfig(StrictModel):
     """Phase keeping (eq. 24-28): ``law`` paper (seat law), frew (neighbour law) or none;
     ``gain_per_s`` is k of eq. (24); ``predictive`` steers on the phase each vehicle will have
-    when it reaches the circle (an improvement; false: the paper's literal law)."""
+    when it reaches the circle (an improvement; false: the paper's literal law).
+
+    ``actuator``: how the law acts. ``speed`` commands the speed it wants; ``radius`` keeps
+    cruise speed and flies the field around an effective radius within ``radius_band_m`` of
+    ``radius_m`` (for autopilots that hold their own airspeed, e.g. PX4 fixed-wing offboard);
+    ``auto`` (default) is ``speed`` where the vehicle honours a speed command and ``radius``
+    where it does not (the fast simulation honours it: ``speed``)."""
 
     law: Literal["paper", "frew", "none"] = "paper"
     gain_per_s: NonNegative = 0.1
     predictive: bool = True
+    actuator: Literal["auto", "speed", "radius"] = "auto"
+    radius_band_m: Positive = 15.0
+
+    def build(self, honours_speed: bool = True) -> PhaseParams:
+        """The core's phase parameters, ``auto`` resolved for a vehicle that does (default) or
+        does not honour a speed command (``app.core.agent.resolve_actuator``)."""
+        return PhaseParams(
+            law=self.law,
+            gain_per_s=self.gain_per_s,
+            predictive=self.predictive,
+            actuator=resolve_actuator(self.actuator, honours_speed),
+            radius_band_m=self.radius_band_m,
+        )

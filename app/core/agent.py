@@ -37,6 +37,8 @@ PhaseLaw = Literal["paper", "frew", "none"]
 Orbit = Literal["ccw", "cw"]
 FieldMode = Literal["field", "inverse"]
 OrbitPlan = Literal["circle", "ellipse"]
+PhaseActuator = Literal["speed", "radius"]
+ActuatorChoice = Literal["auto", "speed", "radius"]
 
 FREW_C = 2.0
 
@@ -129,20 +131,63 @@ class GuidanceParams:
 
 @dataclass(frozen=True, slots=True)
 class PhaseParams:
-    """Phase keeping by speed: ``paper`` (seat law, eq. 24-28), ``frew`` (neighbour law) or
-    ``none`` (cruise). ``gain_per_s`` is k of eq. (24). With ``predictive`` the law steers on the
-    phase each vehicle will have when it reaches the circle (``phase.arrival_phase_lead``) and
-    drops the (r_d / r)^2 weight."""
+    """Phase keeping: ``paper`` (seat law, eq. 24-28), ``frew`` (neighbour law) or ``none``
+    (cruise). ``gain_per_s`` is k of eq. (24). With ``predictive`` the law steers on the phase
+    each vehicle will have when it reaches the circle (``phase.arrival_phase_lead``) and drops
+    the (r_d / r)^2 weight.
+
+    ``actuator``: how the law's wanted speed v_w (eq. 27) acts. ``speed`` (the paper's) commands
+    it. ``radius`` (for autopilots that hold their own airspeed, e.g. PX4 fixed-wing offboard)
+    keeps cruise speed and flies the field around an effective radius
+    r_eff = r_d v_cruise / v_w instead: at a fixed speed v the phase rate on a circle is v / r,
+    so r_eff gives the phase rate the speed law asked for. r_eff stays within
+    ``radius_band_m`` of r_d (and no tighter than the course-rate limit allows), changes at most
+    ``radius_rate_m_s`` per second, and the field is built for r_eff rounded to
+    ``radius_step_m`` about r_d (so c and the field are re-solved only when it moves a step;
+    a spaced team has v_w = v_cruise, hence r_eff = r_d exactly).
+    """
 
     law: PhaseLaw = "paper"
     gain_per_s: float = 0.05
     predictive: bool = False
+    actuator: PhaseActuator = "speed"
+    radius_band_m: float = 15.0
+    radius_rate_m_s: float = 1.0
+    radius_step_m: float = 0.5
 
     def __post_init__(self) -> None:
         if self.law not in ("paper", "frew", "none"):
             raise ValueError(f"PhaseParams.law must be paper|frew|none, got {self.law!r}")
         if not (math.isfinite(self.gain_per_s) and self.gain_per_s >= 0.0):
             raise ValueError(f"PhaseParams.gain_per_s must be finite and >= 0: {self.gain_per_s}")
+        if self.actuator not in ("speed", "radius"):
+            raise ValueError(
+                f"PhaseParams.actuator must be 'speed' or 'radius', got {self.actuator!r}"
+            )
+        require_positive(
+            "PhaseParams",
+            radius_band_m=self.radius_band_m,
+            radius_rate_m_s=self.radius_rate_m_s,
+            radius_step_m=self.radius_step_m,
+        )
+
+
+def resolve_actuator(configured: ActuatorChoice, honours_speed: bool) -> PhaseActuator:
+    """The phase actuator to fly: ``auto`` is ``speed`` where the vehicle's autopilot honours a
+    speed command (the built-in simulator, ArduPlane GUIDED) and ``radius`` where it holds its
+    own airspeed (PX4 fixed-wing offboard); ``speed`` and ``radius`` are taken as given."""
+    if configured == "auto":
+        return "speed" if honours_speed else "radius"
+    if configured in ("speed", "radius"):
+        return configured
+    raise ValueError(f"phase actuator must be auto|speed|radius, got {configured!r}")
+
+
+def with_phase_actuator(params: "AgentParams", actuator: PhaseActuator) -> "AgentParams":
+    """``params`` flying phase keeping with ``actuator`` (itself when it already does)."""
+    if params.phase.actuator == actuator:
+        return params
+    return replace(params, phase=replace(params.phase, actuator=actuator))
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,6 +205,12 @@ class AgentParams:
     def __post_init__(self) -> None:
         if self.index < 0:
             raise ValueError(f"AgentParams.index must be >= 0, got {self.index}")
+        ph = self.phase
+        if ph.actuator == "radius" and ph.radius_band_m >= self.guidance.radius_m:
+            raise ValueError(
+                f"PhaseParams.radius_band_m ({ph.radius_band_m} m) must be smaller than the "
+                f"standoff radius ({self.guidance.radius_m} m)"
+            )
         env = self.envelope
         loop = CourseLoop(
             env.course_gain_per_s, env.max_course_rate_rad_s, self.guidance.feed_forward
@@ -210,7 +261,10 @@ class AgentState:
     ``mode``: flying the ordinary field or the inverse one. ``c`` and ``c_speed_m_s``: the
     guidance parameter and the speed it was computed for (``c_speed_m_s = 0``: not yet), by
     the law ``c_law`` (the mission may switch laws between ticks).
+    ``c_radius_m``: the field radius c was computed for (r_d, or the radius actuator's r_eff).
     ``next_switch_check_t_s``: when the ILVF rule is next evaluated.
+    ``radius_m`` and ``radius_t_s``: the radius actuator's filtered r_eff (before rounding to
+    its step) and the time it was last updated (0 and -inf: not yet; it starts at r_d).
     """
 
     mode: FieldMode = "field"
@@ -218,6 +272,9 @@ class AgentState:
     c_speed_m_s: float = 0.0
     c_law: str = ""
     next_switch_check_t_s: float = -math.inf
+    c_radius_m: float = 0.0
+    radius_m: float = 0.0
+    radius_t_s: float = -math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -228,6 +285,8 @@ class Command:
     ``field_course_rad`` is the uncompensated desired ground course and
     ``course_rate_ff_rad_s`` its rate along the vehicle's motion (for adapters that take a rate).
     ``speed_m_s`` is the ground-speed command within the envelope.
+    ``actuator`` is the phase actuator that acted and ``radius_m`` the radius the field was
+    flown around (r_d, or the radius actuator's r_eff; 0: not stated).
     """
 
     course_rad: float
@@ -236,6 +295,8 @@ class Command:
     course_rate_ff_rad_s: float
     c: float
     inverse: bool
+    actuator: PhaseActuator = "speed"
+    radius_m: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -313,7 +374,14 @@ def _check_inputs(inputs: AgentInputs) -> None:
     raise ValueError("agent inputs overflow to a non-finite sum")
 
 
-def _guidance_c(state: AgentState, params: AgentParams, speed_m_s: float) -> AgentState:
+def _design_speed(speed_m_s: float, step_m_s: float) -> float:
+    """``speed_m_s`` rounded up to the c update step (at least one step)."""
+    return max(math.ceil(speed_m_s / step_m_s - 1e-9), 1) * step_m_s
+
+
+def _guidance_c(
+    state: AgentState, params: AgentParams, speed_m_s: float, radius_m: float
+) -> AgentState:
     g = params.guidance
     if g.law == "frew":
         c = FREW_C
@@ -323,19 +391,26 @@ def _guidance_c(state: AgentState, params: AgentParams, speed_m_s: float) -> Age
     else:
         # design for the speed rounded up to the update step, so that the field stays flyable
         # at every speed up to the one it was computed for
-        step = g.c_update_speed_step_m_s
-        design_speed = max(math.ceil(speed_m_s / step - 1e-9), 1) * step
-        if design_speed == state.c_speed_m_s and state.c_law == g.law:
+        design_speed = _design_speed(speed_m_s, g.c_update_speed_step_m_s)
+        if (
+            design_speed == state.c_speed_m_s
+            and state.c_law == g.law
+            and radius_m == state.c_radius_m
+        ):
             return state
         env = params.envelope
-        c = optimal_c(g.radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin)
-        return replace(state, c=c, c_speed_m_s=design_speed, c_law=g.law)
+        c = optimal_c(radius_m, design_speed, env.max_course_rate_rad_s, g.curvature_margin)
+        return replace(state, c=c, c_speed_m_s=design_speed, c_law=g.law, c_radius_m=radius_m)
     if c == state.c and state.c_speed_m_s > 0.0 and state.c_law == g.law:
         return state
-    return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9), c_law=g.law)
+    return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9), c_law=g.law, c_radius_m=radius_m)
 
 
-def _speed_command(inputs: AgentInputs, params: AgentParams, state: AgentState) -> float:
+def _speed_command(
+    inputs: AgentInputs, params: AgentParams, state: AgentState, radius_m: float
+) -> float:
+    """v_w of eq. (27) for the team's phases; with ``predictive`` each phase is led by its
+    arrival lead onto the field's circle ``radius_m`` (r_d, or the radius actuator's r_eff)."""
     env, ph, g = params.envelope, params.phase, params.guidance
     team = inputs.team_positions
     if ph.law == "none" or len(team) < 2 or ph.gain_per_s == 0.0:
@@ -352,7 +427,7 @@ def _speed_command(inputs: AgentInputs, params: AgentParams, state: AgentState) 
         theta = sign * math.atan2(y, x)
         r = math.hypot(x, y)
         if ph.predictive:
-            theta += phase.arrival_phase_lead(r, g.radius_m, state.c)
+            theta += phase.arrival_phase_lead(r, radius_m, state.c)
         if j == params.index:
             own_r = r
         phases.append(theta)
@@ -372,6 +447,82 @@ def _speed_command(inputs: AgentInputs, params: AgentParams, state: AgentState) 
     )
 
 
+def radius_bounds(params: AgentParams, speed_m_s: float) -> tuple[float, float]:
+    """The radius actuator's band (m) at ``speed_m_s``: r_d -/+ ``radius_band_m``, the lower
+    edge raised to 1.05 turn radii at the speed's c design step and ``curvature_margin`` of the
+    course-rate limit (v / r_eff within the limit, with room for the field to converge), but
+    never above r_d (where r_d itself is that tight, the band only widens)."""
+    g, env, ph = params.guidance, params.envelope, params.phase
+    rd = g.radius_m
+    design = _design_speed(max(speed_m_s, env.cruise_speed_m_s), g.c_update_speed_step_m_s)
+    turn_m = design / (g.curvature_margin * env.max_course_rate_rad_s)
+    lower = min(max(rd - ph.radius_band_m, 1.05 * turn_m), rd)
+    return lower, rd + ph.radius_band_m
+
+
+def effective_radius(v_wanted_m_s: float, params: AgentParams, speed_m_s: float) -> float:
+    """r_eff = r_d v_cruise / v_w (the radius on which cruise speed gives the phase rate
+    v_w / r_d the speed law asks for), clamped to ``radius_bounds`` at ``speed_m_s``. Raises
+    ValueError for a wanted speed that is not finite and > 0."""
+    lower, upper = radius_bounds(params, speed_m_s)
+    return _effective_radius(v_wanted_m_s, params, lower, upper)
+
+
+def _effective_radius(
+    v_wanted_m_s: float, params: AgentParams, lower: float, upper: float
+) -> float:
+    if not (math.isfinite(v_wanted_m_s) and v_wanted_m_s > 0.0):
+        raise ValueError(f"wanted speed must be finite and > 0, got {v_wanted_m_s!r}")
+    r = params.guidance.radius_m * params.envelope.cruise_speed_m_s / v_wanted_m_s
+    return min(max(r, lower), upper)
+
+
+def _field_radius(radius_m: float, rd: float, step_m: float, lower: float, upper: float) -> float:
+    """``radius_m`` rounded to the grid r_d + j step, kept within [lower, upper]."""
+    r = rd + round((radius_m - rd) / step_m) * step_m
+    if r < lower:
+        r = rd + math.ceil((lower - rd) / step_m - 1e-9) * step_m
+    elif r > upper:
+        r = rd + math.floor((upper - rd) / step_m + 1e-9) * step_m
+    return min(max(r, lower), upper)
+
+
+def _radius_actuator(
+    state: AgentState, inputs: AgentInputs, params: AgentParams, speed_now: float
+) -> tuple[AgentState, float]:
+    """The radius actuator's tick: the speed law's v_w (on the field flown last tick), its
+    r_eff, slewed at ``radius_rate_m_s`` from the last one, rounded to the field's step; c for
+    that field. Returns the new state and the field's radius."""
+    g, ph = params.guidance, params.phase
+    rd, step = g.radius_m, ph.radius_step_m
+    lower, upper = radius_bounds(params, speed_now)
+    prev = state.radius_m if state.radius_m > 0.0 else rd
+    prev_field = _field_radius(prev, rd, step, lower, upper)
+    s = _guidance_c(state, params, speed_now, prev_field)
+    v_wanted = _speed_command(inputs, params, s, prev_field)
+    wanted = _effective_radius(v_wanted, params, lower, upper)
+    # the first tick (radius_t_s = -inf) starts from r_d; time going back holds the radius
+    dt = inputs.t_s - state.radius_t_s
+    max_change = ph.radius_rate_m_s * dt if 0.0 < dt < math.inf else 0.0
+    filtered = prev + min(max(wanted - prev, -max_change), max_change)
+    # the band moves with speed: a radius the vehicle can no longer turn is left at once
+    filtered = min(max(filtered, lower), upper)
+    radius = _field_radius(filtered, rd, step, lower, upper)
+    s = _guidance_c(s, params, speed_now, radius)
+    # (built directly: this runs every tick, and dataclasses.replace costs ten times more)
+    new_state = AgentState(
+        mode=s.mode,
+        c=s.c,
+        c_speed_m_s=s.c_speed_m_s,
+        c_law=s.c_law,
+        next_switch_check_t_s=s.next_switch_check_t_s,
+        c_radius_m=s.c_radius_m,
+        radius_m=filtered,
+        radius_t_s=inputs.t_s,
+    )
+    return new_state, radius
+
+
 def agent_step(
     state: AgentState, inputs: AgentInputs, params: AgentParams
 ) -> tuple[AgentState, Command, tuple[AgentEvent, ...]]:
@@ -386,10 +537,14 @@ def agent_step(
        Inside the circle the ordinary field (which leads out to it) is always flown. The check
        is skipped when it cannot matter: far outside (> 2.2 turn radii) or already aligned with a
        flyable field.
-    3. Speed: cruise, or the phase law's speed (eq. 27) from the team's phases.
+    3. Speed: cruise, or the phase law's speed (eq. 27) from the team's phases. With the
+       ``radius`` actuator the speed stays at cruise and the law's speed is flown as the
+       field's radius instead (``effective_radius``); c, the ILVF switch and the field then use
+       that radius (all of this before step 2).
     4. Course: the field direction in the target's frame (eq. 8/14), corrected for the target's
-       motion (eq. 15) to a ground velocity at the commanded speed, and lag-compensated with the
-       ground course's own rate (``guidance.course.course_command``).
+       motion (eq. 15) to a ground velocity at the commanded speed (the ground speed held at
+       cruise with the ``radius`` actuator), and lag-compensated with the ground course's own
+       rate (``guidance.course.course_command``).
 
     Parameters
     ----------
@@ -419,7 +574,12 @@ def agent_step(
     env, g = params.envelope, params.guidance
     own, tgt = inputs.own, inputs.target
     speed_now = own.speed_m_s if own.speed_m_s > 0.0 else env.cruise_speed_m_s
-    new_state = _guidance_c(state, params, speed_now)
+    by_radius = params.phase.actuator == "radius"
+    if by_radius:
+        new_state, radius = _radius_actuator(state, inputs, params, speed_now)
+    else:
+        radius = g.radius_m
+        new_state = _guidance_c(state, params, speed_now, radius)
     c = new_state.c
 
     x, y = own.east_m - tgt.east_m, own.north_m - tgt.north_m
@@ -429,7 +589,7 @@ def agent_step(
 
     if g.uses_inverse_field:
         if inputs.t_s >= new_state.next_switch_check_t_s:
-            new_state, events = _switch_rule(new_state, inputs, params, x, y, vx, vy, c)
+            new_state, events = _switch_rule(new_state, inputs, params, x, y, vx, vy, c, radius)
     elif new_state.mode == "inverse":
         # the switch is off (e.g. the mission's track stage after an approach that used it):
         # never stay on the inverse field, which leads away from the circle
@@ -437,8 +597,11 @@ def agent_step(
         events = (AgentEvent(inputs.t_s, "inverse-field-off", "switch disabled"),)
 
     inverse = new_state.mode == "inverse"
-    speed_cmd = _speed_command(inputs, params, new_state)
-    rel_course, rel_rate = _relative_course(x, y, vx, vy, c, inverse, tgt, params)
+    if by_radius:
+        speed_cmd = env.cruise_speed_m_s
+    else:
+        speed_cmd = _speed_command(inputs, params, new_state, radius)
+    rel_course, rel_rate = _relative_course(x, y, vx, vy, c, inverse, tgt, params, radius)
 
     if (
         tgt.v_east_m_s == 0.0
@@ -449,10 +612,16 @@ def agent_step(
         ground_course, ground_rate = rel_course, rel_rate
     else:
         max_speed = env.max_speed_m_s
-        if g.speed_cap:
-            max_speed = _speed_cap(x, y, math.hypot(vx, vy), tgt, params)
+        if by_radius:
+            # the autopilot holds its own speed: the ground velocity keeps cruise speed (no
+            # relative-speed law, no speed cap: there is no speed to command)
+            relative_speed = False
+        else:
+            relative_speed = g.relative_speed
+            if g.speed_cap:
+                max_speed = _speed_cap(x, y, math.hypot(vx, vy), tgt, params, radius)
         ground_course, ground_rate, speed_cmd = _ground_course(
-            rel_course, rel_rate, tgt, speed_cmd, env, g.relative_speed, max_speed
+            rel_course, rel_rate, tgt, speed_cmd, env, relative_speed, max_speed
         )
 
     cmd_course = course_command(own.course_rad, ground_course, ground_rate, params.course_loop)
@@ -463,6 +632,8 @@ def agent_step(
         course_rate_ff_rad_s=ground_rate,
         c=c,
         inverse=inverse,
+        actuator=params.phase.actuator,
+        radius_m=radius,
     )
     return new_state, command, events
 
@@ -476,9 +647,10 @@ def _switch_rule(
     vx: float,
     vy: float,
     c: float,
+    rd: float,
 ) -> tuple[AgentState, tuple[AgentEvent, ...]]:
     g, env = params.guidance, params.envelope
-    rd, sign = g.radius_m, g.orbit_sign
+    sign = g.orbit_sign
     w = env.max_course_rate_rad_s
     next_check = inputs.t_s + g.switch_check_period_s
     r = math.hypot(x, y)
@@ -556,29 +728,32 @@ def _ground_course(
     return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), max_speed_m_s)
 
 
-def _orbit_axes(speed_m_s: float, params: AgentParams) -> tuple[float, float]:
+def _orbit_axes(speed_m_s: float, params: AgentParams, rd: float) -> tuple[float, float]:
     """Semi-axes (along, across the target's motion) of the orbit flown around a target moving
-    at ``speed_m_s``: the planned one with ``orbit_plan = "ellipse"``, else the circle."""
+    at ``speed_m_s``: the planned one about the circle ``rd`` with ``orbit_plan = "ellipse"``,
+    else the circle."""
     g, env = params.guidance, params.envelope
     if g.orbit_plan == "ellipse" and speed_m_s >= 0.5:
         return planned_orbit_axes(
-            g.radius_m,
+            rd,
             speed_m_s,
             env.min_speed_m_s,
             env.max_course_rate_rad_s,
             g.plan_margin,
             g.plan_max_stretch,
         )
-    return g.radius_m, g.radius_m
+    return rd, rd
 
 
-def _speed_cap(x: float, y: float, rel_speed: float, tgt: TargetInfo, params: AgentParams) -> float:
+def _speed_cap(
+    x: float, y: float, rel_speed: float, tgt: TargetInfo, params: AgentParams, rd: float
+) -> float:
     """The ground-speed limit of ``GuidanceParams.speed_cap``, within the envelope."""
     g, env = params.guidance, params.envelope
     speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
     if speed < 0.1:
         return env.max_speed_m_s
-    a, b = _orbit_axes(speed, params)
+    a, b = _orbit_axes(speed, params, rd)
     profile = orbit_speed_profile(
         a,
         b,
@@ -602,16 +777,17 @@ def _relative_course(
     inverse: bool,
     tgt: TargetInfo,
     params: AgentParams,
+    rd: float,
 ) -> tuple[float, float]:
-    """Course and rate of the field in the target's frame: the paper's circle, or (``orbit_plan
-    = "ellipse"``) the planned orbit around the target (``orbit_plan.planned_orbit_axes``: the
-    circle while it is flyable, else the flyable ellipse closest to it, aligned with the
-    target's velocity)."""
+    """Course and rate of the field in the target's frame: the circle ``rd`` (the paper's r_d,
+    or the radius actuator's r_eff), or (``orbit_plan = "ellipse"``) the planned orbit around
+    the target (``orbit_plan.planned_orbit_axes``: the circle while it is flyable, else the
+    flyable ellipse closest to it, aligned with the target's velocity)."""
     g = params.guidance
-    rd, sign = g.radius_m, g.orbit_sign
+    sign = g.orbit_sign
     speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
     if g.orbit_plan == "ellipse" and not inverse and speed >= 0.5:
-        a, b = _orbit_axes(speed, params)
+        a, b = _orbit_axes(speed, params, rd)
         if a != b:
             ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
             orbit = PlannedOrbit(a, b, ux, uy)
@@ -619,8 +795,9 @@ def _relative_course(
     return course_and_rate(x, y, vx, vy, _field(rd, c, sign, inverse))
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=256)
 def _field(radius_m: float, c: float, orbit_sign: int, inverse: bool) -> FieldParams:
     """The (validated, immutable) field for these parameters, built once per c rather than on
-    every tick: c changes only when the speed moves by ``c_update_speed_step_m_s``."""
+    every tick: c changes only when the speed moves by ``c_update_speed_step_m_s`` or the
+    radius actuator's r_eff by ``PhaseParams.radius_step_m``."""
     return FieldParams(radius_m, c, orbit_sign, inverse)
