@@ -44,6 +44,13 @@ class OffboardRecorder:
     async def set_position_velocity_ned(self, position_ned_yaw: Any, velocity_ned_yaw: Any) -> None:
         self.calls.append(("position+velocity", position_ned_yaw, velocity_ned_yaw))
 
+    async def set_position_velocity_acceleration_ned(
+        self, position_ned_yaw: Any, velocity_ned_yaw: Any, acceleration_ned: Any
+    ) -> None:
+        self.calls.append(
+            ("position+velocity+acceleration", position_ned_yaw, velocity_ned_yaw, acceleration_ned)
+        )
+
     async def start(self) -> None:
         if self.refuse is not None:
             raise OffboardError(self.refuse, "start()")
@@ -73,7 +80,8 @@ class CommandRecorder:
 
 
 class ParamRecorder:
-    """Param plugin: ``fail`` refuses every read, ``refuse`` the writes of those names."""
+    """Param plugin: ``fail`` refuses every read, ``refuse`` the writes of those names;
+    ``sets`` records every write (int or float) in order."""
 
     def __init__(
         self,
@@ -82,7 +90,7 @@ class ParamRecorder:
         refuse: dict[str, ParamResult] | None = None,
     ) -> None:
         self.values: dict[str, int | float] = dict(values)
-        self.sets: list[tuple[str, int]] = []
+        self.sets: list[tuple[str, int | float]] = []
         self.fail = fail
         self.refuse = refuse or {}
 
@@ -110,6 +118,22 @@ class ParamRecorder:
         if name in self.refuse:
             raise ParamError(self.refuse[name], "set_param_int()", name, value)
         self.values[name] = value
+
+    async def set_param_float(self, name: str, value: float) -> None:
+        self.sets.append((name, value))
+        if name in self.refuse:
+            raise ParamError(self.refuse[name], "set_param_float()", name, value)
+        self.values[name] = value
+
+
+class NoSleep:
+    """``sleep`` for adapters that wait: records how long, takes no time."""
+
+    def __init__(self) -> None:
+        self.waits: list[float] = []
+
+    async def __call__(self, seconds: float) -> None:
+        self.waits.append(seconds)
 
 
 def params_of(fields: dict[str, Any]) -> list[float]:
@@ -352,8 +376,14 @@ PX4_STATE = VehicleState(
 async def test_px4_sends_a_point_ahead_on_the_course_with_the_course_as_velocity():
     adapter, offboard, commands, _ = px4()
     await adapter.start(CourseSpeedCommand(math.pi / 2, 15.0), 110.0, PX4_STATE)
-    (kind, position, velocity), start = offboard.calls
-    assert (kind, start) == ("position+velocity", ("start",))
+    (kind, position, velocity, acceleration), start = offboard.calls
+    assert (kind, start) == ("position+velocity+acceleration", ("start",))
+    # a straight course: no curvature to feed forward
+    assert (acceleration.north_m_s2, acceleration.east_m_s2, acceleration.down_m_s2) == (
+        pytest.approx(0.0, abs=1e-12),
+        pytest.approx(0.0, abs=1e-12),
+        0.0,
+    )
     # 15 m/s * 4 s = 60 m ahead, due east of the vehicle's local position
     assert position.north_m == pytest.approx(100.0)
     assert position.east_m == pytest.approx(110.0)
@@ -372,15 +402,21 @@ async def test_px4_sends_a_point_ahead_on_the_course_with_the_course_as_velocity
 async def test_px4_lookahead_has_a_floor():
     adapter, offboard, _, _ = px4()
     await adapter.send(CourseSpeedCommand(0.0, 5.0), 100.0, PX4_STATE)
-    _, position, _ = offboard.calls[0]
+    _, position, _, _ = offboard.calls[0]
     assert position.north_m == pytest.approx(140.0)  # 40 m floor, not 5 * 4 = 20 m
 
 
-async def test_px4_changes_airspeed_only_when_it_changes():
+async def test_px4_sends_the_airspeed_once_per_start_as_v1_16_ignores_it_in_offboard():
     adapter, _, commands, _ = px4()
-    for speed in (15.0, 15.05, 15.0, 16.0, 16.0):
+    assert adapter.honours_speed is False
+    await adapter.start(CourseSpeedCommand(0.0, 15.0), 100.0, PX4_STATE)
+    for speed in (15.05, 16.0, 12.0, 17.5):
         await adapter.send(CourseSpeedCommand(0.0, speed), 100.0, PX4_STATE)
-    assert [f["param2"] for *_, f in commands.sent] == [15.0, 16.0]
+    assert [f["param2"] for *_, f in commands.sent] == [15.0]
+    # taken back after a hand-over: once again, the new first speed
+    await adapter.start(CourseSpeedCommand(0.0, 13.0), 100.0, PX4_STATE)
+    await adapter.send(CourseSpeedCommand(0.0, 14.0), 100.0, PX4_STATE)
+    assert [f["param2"] for *_, f in commands.sent] == [15.0, 13.0]
 
 
 async def test_px4_refused_airspeed_is_a_link_error():
@@ -456,6 +492,7 @@ def arduplane(
     params: ParamRecorder | None = None,
     limits: SetpointLimits = LIMITS,
     gcs_system_id: int | None = 245,
+    sleep: NoSleep | None = None,
 ) -> ArduPlaneAdapter:
     return ArduPlaneAdapter(
         vehicle_id=5,
@@ -463,6 +500,7 @@ def arduplane(
         params=params or ParamRecorder(STOCK_ARDUPLANE),
         limits=limits,
         gcs_system_id=gcs_system_id,
+        sleep=sleep or NoSleep(),
     )
 
 
@@ -470,7 +508,8 @@ async def test_arduplane_makes_a_stock_gcs_failsafe_return_it_and_says_so(caplog
     params = ParamRecorder(STOCK_ARDUPLANE)
     with caplog.at_level("WARNING"):
         await arduplane(params=params).prepare()
-    assert params.sets == [("SYSID_MYGCS", 245), ("FS_GCS_ENABL", 1), ("FS_LONG_ACTN", 1)]
+    # the failsafe is enabled last, once it will return the aircraft (see test_autopilot_gcs.py)
+    assert params.sets == [("SYSID_MYGCS", 245), ("FS_LONG_ACTN", 1), ("FS_GCS_ENABL", 1)]
     assert params.values == STOCK_ARDUPLANE | {
         "SYSID_MYGCS": 245,
         "FS_GCS_ENABL": 1,
@@ -478,8 +517,9 @@ async def test_arduplane_makes_a_stock_gcs_failsafe_return_it_and_says_so(caplog
     }
     changes = [r.getMessage() for r in caplog.records]
     assert changes[0].startswith("vehicle 5: set SYSID_MYGCS from 255 to 245 so that")
-    assert changes[1].startswith("vehicle 5: set FS_GCS_ENABL from 0 to 1 so that")
-    assert changes[2].startswith("vehicle 5: set FS_LONG_ACTN from 0 to 1 so that")
+    assert changes[1].startswith("vehicle 5: set FS_LONG_ACTN from 0 to 1 so that")
+    assert changes[2].startswith("vehicle 5: set FS_GCS_ENABL from 0 to 1 so that")
+    assert all(change.endswith("(restored at the end)") for change in changes)
 
 
 async def test_arduplane_leaves_a_failsafe_that_already_returns_it_alone():
@@ -505,7 +545,7 @@ async def test_arduplane_refused_parameter_write_is_a_link_error_naming_it():
     params = ParamRecorder(STOCK_ARDUPLANE, refuse={"FS_GCS_ENABL": ParamResult.TIMEOUT})
     with pytest.raises(LinkError, match="vehicle 5: cannot set FS_GCS_ENABL from 0 to 1: TIMEOUT"):
         await arduplane(params=params).prepare()
-    assert params.sets == [("SYSID_MYGCS", 245), ("FS_GCS_ENABL", 1)]  # nothing after it
+    assert params.sets == [("SYSID_MYGCS", 245), ("FS_LONG_ACTN", 1), ("FS_GCS_ENABL", 1)]
 
 
 async def test_arduplane_unreadable_parameter_is_a_link_error_naming_it():
@@ -517,8 +557,11 @@ async def test_arduplane_unreadable_parameter_is_a_link_error_naming_it():
         await arduplane(params=params).prepare()
     # the failsafe parameters are named as they are
     no_fs = ParamRecorder({"SYSID_MYGCS": 245})
-    with pytest.raises(LinkError, match="vehicle 5: cannot read FS_GCS_ENABL: TIMEOUT"):
+    with pytest.raises(LinkError, match="vehicle 5: cannot read FS_LONG_ACTN: TIMEOUT"):
         await arduplane(params=no_fs).prepare()
+    no_enable = ParamRecorder({"SYSID_MYGCS": 245, "FS_LONG_ACTN": 1})
+    with pytest.raises(LinkError, match="vehicle 5: cannot read FS_GCS_ENABL: TIMEOUT"):
+        await arduplane(params=no_enable).prepare()
 
 
 async def test_arduplane_4_7_has_its_gcs_id_set_under_the_new_name():
@@ -527,7 +570,7 @@ async def test_arduplane_4_7_has_its_gcs_id_set_under_the_new_name():
         {"MAV_GCS_SYSID": 255, "MAV_GCS_SYSID_HI": 0, "FS_GCS_ENABL": 0, "FS_LONG_ACTN": 0}
     )
     await arduplane(params=params).prepare()
-    assert params.sets == [("MAV_GCS_SYSID", 245), ("FS_GCS_ENABL", 1), ("FS_LONG_ACTN", 1)]
+    assert params.sets == [("MAV_GCS_SYSID", 245), ("FS_LONG_ACTN", 1), ("FS_GCS_ENABL", 1)]
 
 
 @pytest.mark.parametrize(
@@ -597,16 +640,24 @@ async def test_arduplane_stop_loiters():
     assert (fields["command"], fields["param1"], fields["param2"]) == (176, 1.0, 12.0)
 
 
-async def test_arduplane_without_a_course_rate_limit_does_not_send_a_lateral_accel_of_zero():
-    # ArduPlane takes GUIDED_CHANGE_HEADING param3 as at least 0.05 m/s^2 (MAX(param3, 0.05f)):
-    # 0 would bank it by 0.3 degrees. Unlimited must be a value that leaves the turn to it.
+@pytest.mark.parametrize("limit_course_change", [True, False])
+async def test_arduplane_heading_limits_the_turn_to_the_envelopes_rate(limit_course_change):
+    # param3 is the lateral acceleration ArduPlane may use (bank <= atan(param3 / g)): the
+    # envelope's course rate at the commanded speed, a = v * W, whether or not the setpoints'
+    # course change is limited (the mission files turn that off); not 1000 (no limit)
     commands = CommandRecorder()
-    free = SetpointLimits(VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2), limit_course_change=False)
-    adapter = arduplane(commands, limits=free)
+    limits = SetpointLimits(
+        VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2), limit_course_change=limit_course_change
+    )
+    adapter = arduplane(commands, limits=limits)
     await adapter.send(CourseSpeedCommand(0.0, 15.0), 100.0, STATE)
-    heading = commands.sent[0][3]
-    assert heading["command"] == 43002
-    assert heading["param3"] >= 9.81 * math.tan(math.radians(80.0))
+    await adapter.send(CourseSpeedCommand(1.0, 12.0), 100.0, STATE)
+    first, second = (f for *_, f in commands.sent if f["command"] == 43002)
+    assert first["param3"] == pytest.approx(15.0 * 0.2)
+    assert second["param3"] == pytest.approx(12.0 * 0.2)
+    # the coordinated turn at that bank is the envelope's rate: g tan(bank) / v = W
+    bank = math.atan(second["param3"] / 9.80665)
+    assert 9.80665 * math.tan(bank) / 12.0 == pytest.approx(0.2)
 
 
 async def test_arduplane_takes_off_in_takeoff_mode():

@@ -3,9 +3,10 @@ return the aircraft; and ArduPlane's flight mode names."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -18,12 +19,16 @@ from app.adapters.vehicle.autopilots.base import (
     MAVSDK_GCS_SYSTEM_ID,
     AutopilotName,
     CommandPort,
+    ParamJournal,
     ParamPort,
+    Sleep,
     VehicleState,
+    check_message_rates,
     check_speed_range,
     command_int,
     command_long,
     course_deg_0_360,
+    request_message_rates,
     send_checked_command,
 )
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
@@ -40,10 +45,23 @@ ARDUPLANE_MODE_NAMES: Final[dict[int, str]] = dict(
 ARDUPLANE_GUIDED: Final = mavlink.PLANE_MODE_GUIDED
 ARDUPLANE_LOITER: Final = mavlink.PLANE_MODE_LOITER
 ARDUPLANE_TAKEOFF: Final = mavlink.PLANE_MODE_TAKEOFF
-#: GUIDED_CHANGE_HEADING param3 when the course rate is unlimited: ArduPlane takes at least
-#: 0.05 m/s^2 (``MAX(param3, 0.05f)``, so 0 would barely turn) and banks no more than its own
-#: roll limit, so a value this large leaves the turn to the airframe
-UNLIMITED_LATERAL_ACCEL_M_S2: Final = 1000.0
+#: the least GUIDED_CHANGE_HEADING param3 ArduPlane takes (m/s^2; ``MAX(param3, 0.05f)``)
+MIN_LATERAL_ACCEL_M_S2: Final = 0.05
+#: the rate asked for each message the link steers or reports on (Hz), unless told otherwise:
+#: ArduPlane streams them at 1 Hz (or its SRn_ rates) to a GCS that does not ask
+DEFAULT_TELEMETRY_RATE_HZ: Final = 10.0
+#: GLOBAL_POSITION_INT is what the link steers on (position, velocity, time_boot_ms); ATTITUDE
+#: (bank) and VFR_HUD (airspeed) are what the hand-over and the course-loop identification read.
+#: HEARTBEAT is not asked: it stays at 1 Hz.
+TELEMETRY_MESSAGES: Final = ("GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
+#: how long to wait after the GCS id is ours before the GCS failsafe is enabled: 2.5 periods of
+#: MAVSDK's 1 Hz heartbeat, so that ArduPlane has counted one from the new id (see ``prepare``)
+GCS_HEARTBEAT_WAIT_S: Final = 2.5
+
+
+def arduplane_telemetry_rates(rate_hz: float = DEFAULT_TELEMETRY_RATE_HZ) -> dict[str, float]:
+    """Every message of ``TELEMETRY_MESSAGES`` at ``rate_hz``."""
+    return dict.fromkeys(TELEMETRY_MESSAGES, rate_hz)
 
 
 def arduplane_mode_name(custom_mode: int) -> str:
@@ -71,6 +89,8 @@ FS_GCS_ENABL_NOT_IN_GUIDED: Final = (0, 3)
 #: the failsafe (``failsafe_long_on_event``); 1 returns (RTL)
 FS_LONG_ACTN_CONTINUE: Final = 0
 FS_LONG_ACTN_RTL: Final = 1
+#: 1: ArduPlane ignores every packet not from SYSID_MYGCS (or its own system)
+SYSID_ENFORCE: Final = "SYSID_ENFORCE"
 
 
 @dataclass(slots=True)
@@ -78,22 +98,50 @@ class ArduPlaneAdapter:
     """ArduPlane GUIDED: course over ground, airspeed and altitude by the guided slew commands.
 
     Each goes out when it changes by more than its deadband; ArduPlane keeps the last one until
-    the mode changes. The heading command's param3 is the allowed centripetal acceleration,
-    speed * max course rate (m/s^2); ArduPlane banks at most atan(param3 / g), so its course
-    rate stays under param3 / speed. Take-off is TAKEOFF mode: ArduPlane refuses
-    MAV_CMD_NAV_TAKEOFF (which MAVSDK's ``Action.takeoff`` sends) unless it is a QuadPlane.
+    the mode changes. The speed is flown as commanded (GUIDED_CHANGE_SPEED, ``honours_speed``).
+    The heading command's param3 is the lateral acceleration the envelope allows at the
+    commanded speed, a = v * max course rate (m/s^2): ArduPlane banks at most atan(a / g)
+    (mode_guided.cpp ``ModeGuided::update``), and a coordinated turn at that bank turns at
+    g tan(bank) / v = the envelope's course rate, the rate the guidance was built for.
+    Take-off is TAKEOFF mode: ArduPlane refuses MAV_CMD_NAV_TAKEOFF (which MAVSDK's
+    ``Action.takeoff`` sends) unless it is a QuadPlane.
 
-    GUIDED has no setpoint stream and so no offboard-loss failsafe: if the app dies the aircraft
-    flies its last course for ever unless ArduPlane's GCS failsafe catches it. Stock ArduPlane
-    has it off (FS_GCS_ENABL 0), counts only heartbeats from SYSID_MYGCS (255, not MAVSDK's
-    245) and, in GUIDED, continues through it (FS_LONG_ACTN 0). So before take-off ``prepare``
-    reads the three and sets SYSID_MYGCS to ``gcs_system_id``, FS_GCS_ENABL 0 or 3 to 1
-    (heartbeat) and FS_LONG_ACTN 0 to 1 (RTL), logging each change; other values are the
-    operator's and are kept. A read or write that fails is a ``LinkError`` naming the parameter:
-    a vehicle that cannot be made to return is refused. ``gcs_system_id`` None leaves all three
-    alone (a warning is logged). ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (with
-    MAV_GCS_SYSID_HI, the top of a range of GCS ids when not below it): when SYSID_MYGCS cannot
-    be read, that one is checked and set instead (a range that holds ``gcs_system_id`` is kept).
+    **Telemetry.** ``prepare`` asks for ``telemetry_rates_hz`` (default every message of
+    ``TELEMETRY_MESSAGES`` at 10 Hz) with MAV_CMD_SET_MESSAGE_INTERVAL, on this link only
+    (GCS_Common.cpp ``set_message_interval``); each ACK is logged, a refusal is a warning (the
+    message then comes at ArduPlane's own rate, 1 Hz by default). ArduPlane denies an interval
+    shorter than its main loop allows (50 Hz loop: above 40 Hz). None asks for nothing.
+
+    **GCS failsafe.** GUIDED has no setpoint stream and so no offboard-loss failsafe: if the app
+    dies the aircraft flies its last course for ever unless ArduPlane's GCS failsafe catches it.
+    Stock ArduPlane has it off (FS_GCS_ENABL 0), counts only heartbeats from SYSID_MYGCS (255,
+    not MAVSDK's 245) and, in GUIDED, continues through it (FS_LONG_ACTN 0). So before take-off
+    ``prepare`` reads the three and sets SYSID_MYGCS to ``gcs_system_id``, FS_LONG_ACTN 0 to 1
+    (RTL) and then FS_GCS_ENABL 0 or 3 to 1 (heartbeat), logging each change; other values are
+    the operator's and are kept. The order matters: ArduPlane raises the failsafe when
+    FS_GCS_ENABL is on and its last heartbeat from SYSID_MYGCS (``sysid_myggcs_last_seen``,
+    set at boot and by ``GCS_MAVLINK::handle_heartbeat`` only for that id) is more than
+    FS_LONG_TIMEOUT (5 s) old (system.cpp ``Plane::check_long_failsafe``). Enabled the moment
+    after the id changed, before a heartbeat from the new id arrived, it fires at once on a
+    vehicle booted more than 5 s ago. So FS_GCS_ENABL is written only ``gcs_heartbeat_wait_s``
+    (2.5 s, two and a half of MAVSDK's 1 Hz heartbeats) after the id is ours. A read or write
+    that fails is a ``LinkError`` naming the parameter: a vehicle that cannot be made to return
+    is refused. ``gcs_system_id`` None leaves all three alone (a warning is logged). ArduPilot
+    4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (with MAV_GCS_SYSID_HI, the top of a range of GCS
+    ids when not below it): when SYSID_MYGCS cannot be read, that one is checked and set
+    instead (a range that holds ``gcs_system_id`` is kept).
+
+    **QGroundControl beside the app.** SYSID_MYGCS becomes the app's own id (MAVSDK's 245), not
+    QGC's 255. That does not lock QGC out: ArduPlane takes packets from every system unless
+    SYSID_ENFORCE is 1 (GCS_Common.cpp ``GCS_MAVLINK::accept_packet``), so QGC at 255 still
+    changes modes, takes over, reads and writes parameters and flies missions. What it loses
+    while the id is ours: RC_CHANNELS_OVERRIDE and MANUAL_CONTROL (its virtual joystick), which
+    ArduPlane takes only from SYSID_MYGCS (``handle_rc_channels_override``,
+    ``handle_manual_control``), and its heartbeats no longer hold off the GCS failsafe. With
+    SYSID_ENFORCE 1 every GCS but the app is ignored while the id is ours; that is logged as a
+    warning. ``restore_params`` gives the vehicle back its originals, FS_GCS_ENABL first and
+    SYSID_MYGCS last, so the failsafe is off before the id it counts goes back.
+
     With ``check_airspeed_range`` ``prepare`` first refuses a vehicle whose airspeed range
     (AIRSPEED_MIN..AIRSPEED_MAX, ARSPD_FBW_* before ArduPilot 4.5) does not hold the mission's
     speed limits: it would refuse those GUIDED_CHANGE_SPEEDs in flight.
@@ -109,10 +157,28 @@ class ArduPlaneAdapter:
     course_deadband_rad: float = math.radians(0.5)
     speed_deadband_m_s: float = 0.1
     altitude_deadband_m: float = 0.5
+    telemetry_rates_hz: Mapping[str, float] | None = field(
+        default_factory=arduplane_telemetry_rates
+    )
+    gcs_heartbeat_wait_s: float = GCS_HEARTBEAT_WAIT_S
+    sleep: Sleep = asyncio.sleep
     name: AutopilotName = "arduplane"
     _course_sent: float | None = field(default=None, init=False)
     _speed_sent: float | None = field(default=None, init=False)
     _altitude_sent: float | None = field(default=None, init=False)
+    _journal: ParamJournal = field(init=False)
+
+    def __post_init__(self) -> None:
+        if self.telemetry_rates_hz is not None:
+            check_message_rates(self.telemetry_rates_hz)
+        wait = self.gcs_heartbeat_wait_s
+        if not (math.isfinite(wait) and wait >= 0.0):
+            raise ValueError(f"gcs_heartbeat_wait_s must be finite and >= 0, got {wait!r}")
+        self._journal = ParamJournal(self.vehicle_id)
+
+    @property
+    def honours_speed(self) -> bool:
+        return True
 
     def mode_name(self, custom_mode: int) -> str:
         return arduplane_mode_name(custom_mode)
@@ -131,6 +197,10 @@ class ArduPlaneAdapter:
                 (AIRSPEED_MAX, ARSPD_FBW_MAX),
                 "this ArduPlane takes airspeeds",
             )
+        if self.telemetry_rates_hz:
+            await request_message_rates(
+                self.commands, self.vehicle_id, self.target_component, self.telemetry_rates_hz
+            )
         gcs = self.gcs_system_id
         if gcs is None:
             log.warning(
@@ -143,25 +213,58 @@ class ArduPlaneAdapter:
             )
             return
         name, current, high = await self._gcs_id_params()
-        await self._ensure_param(
+        if await self._ensure_param(
             name,
             lambda value: value == gcs or value <= gcs <= high,
             gcs,
             f"so that the GCS failsafe counts this ground station's heartbeats (system {gcs})",
             current,
-        )
-        await self._ensure_param(
-            FS_GCS_ENABL,
-            lambda value: value not in FS_GCS_ENABL_NOT_IN_GUIDED,
-            FS_GCS_ENABL_HEARTBEAT,
-            "so that losing this ground station's heartbeats raises the GCS failsafe in GUIDED",
-        )
+        ):
+            await self._warn_if_others_are_ignored(gcs, current)
         await self._ensure_param(
             FS_LONG_ACTN,
             lambda value: value != FS_LONG_ACTN_CONTINUE,
             FS_LONG_ACTN_RTL,
             "so that the GCS failsafe returns (RTL) instead of flying the last GUIDED course on",
         )
+        await self._ensure_param(
+            FS_GCS_ENABL,
+            lambda value: value not in FS_GCS_ENABL_NOT_IN_GUIDED,
+            FS_GCS_ENABL_HEARTBEAT,
+            "so that losing this ground station's heartbeats raises the GCS failsafe in GUIDED",
+            before_write=self._wait_for_our_heartbeat,
+        )
+
+    async def _wait_for_our_heartbeat(self) -> None:
+        """Let ArduPlane count a heartbeat from the GCS id before its failsafe is enabled."""
+        log.info(
+            "vehicle %d: waiting %.1f s for it to hear our heartbeat before enabling %s",
+            self.vehicle_id,
+            self.gcs_heartbeat_wait_s,
+            FS_GCS_ENABL,
+        )
+        await self.sleep(self.gcs_heartbeat_wait_s)
+
+    async def _warn_if_others_are_ignored(self, gcs: int, previous: int) -> None:
+        try:
+            enforced = await self.params.get_param_int(SYSID_ENFORCE)
+        except ParamError:
+            return
+        if enforced:
+            log.warning(
+                "vehicle %d: %s is 1: while the GCS id is %d, the vehicle ignores every other "
+                "ground station (system %d before, a QGroundControl at 255); restored at the end",
+                self.vehicle_id,
+                SYSID_ENFORCE,
+                gcs,
+                previous,
+            )
+
+    async def restore_params(self) -> None:
+        """Write back what ``prepare`` changed: FS_GCS_ENABL, then FS_LONG_ACTN, then the GCS id
+        (the reverse of the order they were set), so the failsafe is off before the id it
+        counts changes. Failures are logged; nothing is raised."""
+        await self._journal.restore(self.params)
 
     async def _gcs_id_params(self) -> tuple[str, int, int]:
         """The parameter naming the vehicle's GCS, its value, and the top of the range of GCS
@@ -199,9 +302,11 @@ class ArduPlaneAdapter:
         wanted: int,
         why: str,
         current: int | None = None,
-    ) -> None:
-        """Read ``name`` (unless its ``current`` value is given); when it is not acceptable set
-        it to ``wanted`` and say why."""
+        before_write: Callable[[], Awaitable[None]] | None = None,
+    ) -> bool:
+        """Read ``name`` (unless its ``current`` value is given); when it is not acceptable
+        (await ``before_write`` and) set it to ``wanted``, record its original for
+        ``restore_params`` and say why. True when it was changed."""
         if current is None:
             try:
                 current = await self.params.get_param_int(name)
@@ -212,7 +317,9 @@ class ArduPlaneAdapter:
                 ) from exc
         log.info("vehicle %d: %s = %d", self.vehicle_id, name, current)
         if acceptable(current):
-            return
+            return False
+        if before_write is not None:
+            await before_write()
         try:
             await self.params.set_param_int(name, wanted)
         except ParamError as exc:
@@ -221,9 +328,16 @@ class ArduPlaneAdapter:
                 f"{exc.result.name}; refusing a vehicle whose GCS failsafe cannot be made to "
                 "return it"
             ) from exc
+        self._journal.record(name, current)
         log.warning(
-            "vehicle %d: set %s from %d to %d %s", self.vehicle_id, name, current, wanted, why
+            "vehicle %d: set %s from %d to %d %s (restored at the end)",
+            self.vehicle_id,
+            name,
+            current,
+            wanted,
+            why,
         )
+        return True
 
     def mode_command(self, custom_mode: int) -> MavlinkMessage:
         return command_long(
@@ -234,8 +348,11 @@ class ArduPlaneAdapter:
         )
 
     def heading_command(self, course_rad: float, speed_m_s: float) -> MavlinkMessage:
-        rate = self.limits.max_course_change_rad_s
-        max_lateral_accel = speed_m_s * rate if rate is not None else UNLIMITED_LATERAL_ACCEL_M_S2
+        """GUIDED_CHANGE_HEADING: param1 course over ground, param2 the course (deg, [0, 360)),
+        param3 the lateral acceleration limit v * max course rate (m/s^2; the envelope's rate
+        whether or not the setpoints' course change is limited)."""
+        rate = self.limits.envelope.max_course_rate_rad_s
+        max_lateral_accel = max(speed_m_s * rate, MIN_LATERAL_ACCEL_M_S2)
         return command_int(
             self.vehicle_id,
             self.target_component,

@@ -6,13 +6,13 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Awaitable, Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any, Final, Literal, Protocol
 
 from mavsdk.autopilot import Autopilot
 from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
-from mavsdk.plugins.offboard import OffboardError, PositionNedYaw, VelocityNedYaw
+from mavsdk.plugins.offboard import AccelerationNed, OffboardError, PositionNedYaw, VelocityNedYaw
 from mavsdk.plugins.param import ParamError, ParamResult
 from mavsdk.vehicle import Vehicle
 from pymavlink.dialects.v20 import common as mavlink
@@ -45,6 +45,19 @@ class OffboardPort(Protocol):
     async def stop(self) -> Any: ...
 
 
+class AccelerationOffboardPort(OffboardPort, Protocol):
+    """An offboard port that also takes position + velocity + acceleration (MAVSDK 4's
+    ``set_position_velocity_acceleration_ned``: SET_POSITION_TARGET_LOCAL_NED with only the
+    yaw rate ignored, resent at 20 Hz)."""
+
+    async def set_position_velocity_acceleration_ned(
+        self,
+        position_ned_yaw: PositionNedYaw,
+        velocity_ned_yaw: VelocityNedYaw,
+        acceleration_ned: AccelerationNed,
+    ) -> Any: ...
+
+
 class CommandPort(Protocol):
     """MavlinkDirectAsync.send_command: a COMMAND_LONG/COMMAND_INT in, its final ack out."""
 
@@ -57,6 +70,45 @@ class ParamPort(Protocol):
     async def get_param_float(self, name: str) -> float: ...
 
     async def set_param_int(self, name: str, value: int) -> Any: ...
+
+    async def set_param_float(self, name: str, value: float) -> Any: ...
+
+
+#: how an adapter waits (``asyncio.sleep``; tests pass one that takes no time)
+Sleep = Callable[[float], Awaitable[None]]
+
+
+@dataclass(slots=True)
+class ParamJournal:
+    """The original value of every parameter an adapter changed, to write back at the end.
+
+    ``record`` keeps the first original of a name (a second change of the same parameter does
+    not overwrite what the vehicle had before the app); ``restore`` writes them back in the
+    reverse of the order they were first changed, so the last safety setting made is the first
+    undone. A write that fails is logged and the next one is tried: restoring never raises
+    (``asyncio.CancelledError`` still goes through).
+    """
+
+    vehicle_id: int
+    originals: dict[str, int | float] = field(default_factory=dict)
+
+    def record(self, name: str, original: int | float) -> None:
+        self.originals.setdefault(name, original)
+
+    async def restore(self, params: ParamPort) -> None:
+        for name, value in reversed(list(self.originals.items())):
+            try:
+                if isinstance(value, int):
+                    await params.set_param_int(name, value)
+                else:
+                    await params.set_param_float(name, value)
+            except Exception as exc:  # cleanup: every failure is logged, none is raised
+                log.error(
+                    "vehicle %d: could not restore %s to %s: %s", self.vehicle_id, name, value, exc
+                )
+                continue
+            del self.originals[name]
+            log.info("vehicle %d: restored %s to %s", self.vehicle_id, name, value)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,6 +149,12 @@ class AutopilotAdapter(Protocol):
 
     name: AutopilotName
 
+    @property
+    def honours_speed(self) -> bool:
+        """Whether the vehicle flies the commanded speed in the control mode (the phase keeping
+        may use speed); False for an autopilot that holds its own airspeed there."""
+        ...
+
     def mode_name(self, custom_mode: int) -> str:
         """The flight mode name from HEARTBEAT.custom_mode."""
         ...
@@ -107,7 +165,13 @@ class AutopilotAdapter(Protocol):
         ...
 
     async def prepare(self) -> None:
-        """Checks and settings before take-off; raises ``LinkError`` on a refusal."""
+        """Checks and settings before take-off; raises ``LinkError`` on a refusal. Every
+        parameter it changes is recorded with its original value for ``restore_params``."""
+        ...
+
+    async def restore_params(self) -> None:
+        """Write back the original of every parameter ``prepare`` changed, in an order that
+        cannot trip a failsafe on the way; failures are logged, never raised."""
         ...
 
     async def start(
@@ -230,6 +294,61 @@ def command_int(
         target_component_id=target_component,
         fields_json=json.dumps(fields),
     )
+
+
+def message_interval_command(
+    target_system: int, target_component: int, message_id: int, rate_hz: float
+) -> MavlinkMessage:
+    """MAV_CMD_SET_MESSAGE_INTERVAL: param1 the message id, param2 the interval (us), param3 0
+    (to the link the command came on: ArduPilot denies any other, GCS_Common.cpp
+    ``handle_command_set_message_interval``)."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        raise ValueError(f"a telemetry rate must be finite and > 0 Hz, got {rate_hz!r}")
+    return command_long(
+        target_system,
+        target_component,
+        mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+        (float(message_id), round(1e6 / rate_hz), 0.0),
+    )
+
+
+def check_message_rates(rates_hz: Mapping[str, float]) -> None:
+    """Refuse (``ValueError``) a message that is not MAVLink's or a rate that is not > 0."""
+    for name, rate_hz in rates_hz.items():
+        if not hasattr(mavlink, f"MAVLINK_MSG_ID_{name}"):
+            raise ValueError(f"unknown MAVLink message {name!r} in the telemetry rates")
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            raise ValueError(f"the rate of {name} must be finite and > 0 Hz, got {rate_hz!r}")
+
+
+async def request_message_rates(
+    port: CommandPort,
+    vehicle_id: int,
+    target_component: int,
+    rates_hz: Mapping[str, float],
+) -> dict[str, bool]:
+    """Ask for each message (by MAVLink name) at its rate on this link; the answer per name
+    (True: accepted). A refusal or a lost answer is logged, not raised: the vehicle still sends
+    the message at its own rate, and the mission flies on it, worse."""
+    accepted: dict[str, bool] = {}
+    for name, rate_hz in rates_hz.items():
+        message_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+        command = message_interval_command(vehicle_id, target_component, message_id, rate_hz)
+        try:
+            await send_checked_command(port, command, vehicle_id, f"{name} at {rate_hz:g} Hz")
+        except LinkError as exc:
+            log.warning(
+                "vehicle %d: SET_MESSAGE_INTERVAL not accepted (%s): %s stays at the vehicle's "
+                "own rate",
+                vehicle_id,
+                exc,
+                name,
+            )
+            accepted[name] = False
+            continue
+        log.info("vehicle %d: %s requested at %g Hz (accepted)", vehicle_id, name, rate_hz)
+        accepted[name] = True
+    return accepted
 
 
 # ---------------------------------------------------------------------------------------------

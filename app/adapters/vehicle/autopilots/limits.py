@@ -52,7 +52,7 @@ class SentSetpoint:
 
 COURSE_TOLERANCE_RAD: Final = 1e-9
 
-LimitKind = Literal["speed_below_min", "speed_above_max", "course_rate"]
+LimitKind = Literal["speed_below_min", "speed_above_max", "course_rate", "course_rate_feed_forward"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,7 +76,9 @@ def limit_setpoint(
 
     Speed is clamped into [min, max]. When a previous setpoint is known, the course moves
     towards the requested one by at most ``max_course_change_rad_s * (t_s - previous.t_s)``
-    (the shorter way round); time running backwards counts as no time.
+    (the shorter way round); time running backwards counts as no time. The course rate to feed
+    forward (``course_rate_rad_s``) is held within the envelope's +-max course rate, whatever
+    ``limit_course_change`` says: no vehicle turns faster, and it becomes a curvature or a bank.
     """
     reasons: list[Limited] = []
     envelope = limits.envelope
@@ -107,6 +109,18 @@ def limit_setpoint(
                 )
             )
             course = wrap_pi(previous.course_rad + math.copysign(allowed, delta))
+    max_rate = envelope.max_course_rate_rad_s
+    course_rate = command.course_rate_rad_s
+    if abs(course_rate) > max_rate + COURSE_TOLERANCE_RAD:
+        reasons.append(
+            Limited(
+                "course_rate_feed_forward",
+                f"course rate {course_rate:+.4f} rad/s to feed forward exceeds {max_rate} rad/s",
+            )
+        )
+        course_rate = math.copysign(max_rate, course_rate)
     if not reasons:
         return replace(command, course_rad=course), ()
-    return CourseSpeedCommand(course, speed, command.altitude_m), tuple(reasons)
+    return replace(
+        command, course_rad=course, speed_m_s=speed, course_rate_rad_s=course_rate
+    ), tuple(reasons)

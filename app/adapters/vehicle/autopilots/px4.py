@@ -1,30 +1,34 @@
-"""The PX4 fixed-wing adapter: a point ahead on the course with the course as velocity, the
-airspeed by MAV_CMD_DO_CHANGE_SPEED; and PX4's flight mode names."""
+"""The PX4 fixed-wing adapter: a point ahead on the course with the course as velocity and the
+wanted path curvature as acceleration; and PX4's flight mode names."""
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
 from mavsdk.plugins.mavlink_direct import MavlinkMessage
-from mavsdk.plugins.offboard import PositionNedYaw, VelocityNedYaw
+from mavsdk.plugins.offboard import AccelerationNed, PositionNedYaw, VelocityNedYaw
 from mavsdk.plugins.param import ParamError
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.base import (
+    AccelerationOffboardPort,
     AutopilotName,
     CommandPort,
     OffboardControl,
-    OffboardPort,
+    ParamJournal,
     ParamPort,
     VehicleState,
     check_finite,
+    check_message_rates,
     check_speed_range,
     command_long,
     offboard_call,
+    request_message_rates,
     send_checked_command,
 )
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
@@ -72,36 +76,109 @@ def px4_mode_name(custom_mode: int) -> str:
 #: PX4 fixed-wing's airspeed range (m/s): airspeed setpoints are held within it
 FW_AIRSPD_MIN: Final = "FW_AIRSPD_MIN"
 FW_AIRSPD_MAX: Final = "FW_AIRSPD_MAX"
+#: the airspeed PX4 flies in OFFBOARD (m/s, a float parameter)
+FW_AIRSPD_TRIM: Final = "FW_AIRSPD_TRIM"
 COM_OBL_RC_ACT: Final = "COM_OBL_RC_ACT"
 COM_OBL_RC_ACT_HOLD: Final = 5
 
 
+def normal_acceleration_ned(
+    course_rad: float, speed_m_s: float, course_rate_rad_s: float, max_course_rate_rad_s: float
+) -> tuple[float, float]:
+    """The horizontal acceleration (north, east; m/s^2) of flying ``course_rad`` at ``speed_m_s``
+    while the course turns at ``course_rate_rad_s`` (positive clockwise seen from above).
+
+    a_n = v * course_rate, normal to the velocity, to its right for a clockwise turn; the path's
+    curvature is then a_n / v^2 = course_rate / v. The rate is first held within
+    +-``max_course_rate_rad_s`` (the envelope: the vehicle cannot turn faster), so
+    |a_n| <= v * max_course_rate_rad_s. Zero speed or zero rate gives zero.
+    """
+    rate = max(-max_course_rate_rad_s, min(max_course_rate_rad_s, course_rate_rad_s))
+    a_n = speed_m_s * rate
+    # the unit normal to the right of a course chi (clockwise from north) is (-sin chi, cos chi)
+    return -a_n * math.sin(course_rad), a_n * math.cos(course_rad)
+
+
 @dataclass(slots=True)
 class Px4FixedWingAdapter(OffboardControl):
-    """PX4 fixed-wing: a point ``lookahead`` ahead on the course plus the course as velocity.
+    """PX4 fixed-wing: a point ``lookahead`` ahead on the course, the course as velocity, and the
+    course's rate as the acceleration normal to it (``set_position_velocity_acceleration_ned``).
 
-    PX4 flies a position + velocity setpoint as a line through the point along the velocity,
-    at its own airspeed; the commanded speed goes out as mavlink.MAV_CMD_DO_CHANGE_SPEED (airspeed)
-    whenever it moves by more than ``speed_deadband_m_s``. ``offboard_loss_action`` is the
-    COM_OBL_RC_ACT wanted (what PX4 does ~1 s after setpoints stop: 5 = hold, the default here;
-    PX4's own default 0 flies straight on). It is read and, if different, set before take-off;
-    ``None`` leaves the parameters alone (for a PX4-like vehicle without parameters). Before
-    that a vehicle whose FW_AIRSPD_MIN..FW_AIRSPD_MAX does not hold the mission's speed limits
-    is refused: PX4 would hold the commanded airspeeds within it.
+    PX4 v1.16 flies a position + velocity setpoint in its position controller's AUTO_PATH mode:
+    a line through the point along the velocity, with the acceleration's component normal to
+    the velocity turned into a path curvature |v|^2 / |a_n| that NPFG feeds forward
+    (FixedwingPositionControl.cpp: ``Run``, the offboard ``trajectory_setpoint`` branch, and
+    ``control_auto_path``). The adapter sends a_n = v * course_rate (``normal_acceleration_ned``),
+    so a vehicle on a turning course is not left to catch the turn by feedback alone;
+    ``curvature_feed_forward`` False sends position + velocity only.
+
+    **The sign in v1.16.** That branch computes the curvature's direction as
+    ``-v_hat.cross(a_n_hat)``: an acceleration to the right of the velocity (a clockwise turn)
+    comes out as a negative radius, which NPFG flies as counter-clockwise (its positive curvature
+    is clockwise: ``navigateLoiter``). PX4 fixed that sign after v1.16 (PX4-Autopilot PR #27582,
+    in fw_mode_manager). ``mirror_normal_accel`` True (the default, for v1.16 and earlier) sends
+    the acceleration mirrored about the velocity so that v1.16 feeds forward the right turn;
+    set it False for a PX4 with the fix.
+
+    **Speed.** PX4 v1.16 does not fly a commanded speed in OFFBOARD (``honours_speed`` False):
+    ``Run`` sets the setpoint's cruising speed to NaN on every offboard trajectory setpoint, so
+    ``adapt_airspeed_setpoint`` flies FW_AIRSPD_TRIM, and ``vehicle_command_poll`` applies
+    MAV_CMD_DO_CHANGE_SPEED only when the controller is in FW_POSCTRL_MODE_AUTO (a
+    position+velocity setpoint puts it in AUTO_PATH), yet ACKs it as accepted. So the adapter
+    sends DO_CHANGE_SPEED once per ``start`` (the first setpoint's speed, for a PX4-like vehicle
+    that does apply it, such as an AUTO mode before the switch) and never again. With
+    ``airspeed_via_trim_param`` (off by default) the speed is flown instead by writing
+    FW_AIRSPD_TRIM, which v1.16 reads within a control cycle (``honours_speed`` True then); see
+    ``_trim_airspeed`` for what each write costs.
+
+    ``offboard_loss_action`` is the COM_OBL_RC_ACT wanted (what PX4 does ~1 s after setpoints
+    stop: 5 = hold, the default here; PX4's own default 0 flies straight on). It is read and, if
+    different, set before take-off; ``None`` leaves the parameters alone (for a PX4-like vehicle
+    without parameters). Before that a vehicle whose FW_AIRSPD_MIN..FW_AIRSPD_MAX does not hold
+    the mission's speed limits is refused: PX4 would hold the commanded airspeeds within it.
+    Every parameter changed is written back by ``restore_params``.
+
+    ``telemetry_rates_hz`` (None: nothing asked): messages to request by
+    MAV_CMD_SET_MESSAGE_INTERVAL in ``prepare``. PX4 SITL's offboard port (UDP 14540, an
+    ``onboard`` mode link) already streams GLOBAL_POSITION_INT at 50 Hz and LOCAL_POSITION_NED at
+    30 Hz (mavlink_main.cpp ``configure_streams_to_default``); a ``normal`` mode link, such as a
+    telemetry radio, streams them at 5 and 1 Hz: set ``PX4_TELEMETRY_RATES_HZ`` there.
     """
 
     vehicle_id: int
-    offboard: OffboardPort
+    offboard: AccelerationOffboardPort
     commands: CommandPort
     params: ParamPort
     limits: SetpointLimits
     target_component: int = 1
     lookahead_s: float = 4.0
     min_lookahead_m: float = 40.0
-    speed_deadband_m_s: float = 0.1
     offboard_loss_action: int | None = COM_OBL_RC_ACT_HOLD
+    curvature_feed_forward: bool = True
+    mirror_normal_accel: bool = True
+    telemetry_rates_hz: Mapping[str, float] | None = None
+    airspeed_via_trim_param: bool = False
+    trim_min_interval_s: float = 5.0
+    trim_deadband_m_s: float = 0.5
     name: AutopilotName = "px4-fixed-wing"
-    _speed_sent: float | None = field(default=None, init=False)
+    _speed_pending: bool = field(default=True, init=False)
+    _trim_sent: float | None = field(default=None, init=False)
+    _trim_sent_t_s: float | None = field(default=None, init=False)
+    _trim_original: float | None = field(default=None, init=False)
+    _journal: ParamJournal = field(init=False)
+
+    def __post_init__(self) -> None:
+        if self.telemetry_rates_hz is not None:
+            check_message_rates(self.telemetry_rates_hz)
+        for what in ("trim_min_interval_s", "trim_deadband_m_s"):
+            value = getattr(self, what)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{what} must be finite and >= 0, got {value!r}")
+        self._journal = ParamJournal(self.vehicle_id)
+
+    @property
+    def honours_speed(self) -> bool:
+        return self.airspeed_via_trim_param
 
     def mode_name(self, custom_mode: int) -> str:
         return px4_mode_name(custom_mode)
@@ -111,6 +188,19 @@ class Px4FixedWingAdapter(OffboardControl):
         return "OFFBOARD"
 
     async def prepare(self) -> None:
+        if self.telemetry_rates_hz:
+            await request_message_rates(
+                self.commands, self.vehicle_id, self.target_component, self.telemetry_rates_hz
+            )
+        if self.airspeed_via_trim_param:
+            try:
+                self._trim_original = await self.params.get_param_float(FW_AIRSPD_TRIM)
+            except ParamError as exc:
+                raise LinkError(
+                    f"vehicle {self.vehicle_id}: cannot read {FW_AIRSPD_TRIM} (asked to fly the "
+                    f"speed through it): {exc.result.name}"
+                ) from exc
+            log.info("vehicle %d: %s = %g", self.vehicle_id, FW_AIRSPD_TRIM, self._trim_original)
         if self.offboard_loss_action is None:
             log.warning(
                 "vehicle %d: %s left unchecked: the offboard-loss failsafe is the vehicle's own",
@@ -132,8 +222,9 @@ class Px4FixedWingAdapter(OffboardControl):
             wanted = self.offboard_loss_action
             if current != wanted:
                 await self.params.set_param_int(COM_OBL_RC_ACT, wanted)
+                self._journal.record(COM_OBL_RC_ACT, current)
                 log.warning(
-                    "vehicle %d: set %s from %d to %d",
+                    "vehicle %d: set %s from %d to %d (restored at the end)",
                     self.vehicle_id,
                     COM_OBL_RC_ACT,
                     current,
@@ -143,6 +234,9 @@ class Px4FixedWingAdapter(OffboardControl):
             raise LinkError(
                 f"vehicle {self.vehicle_id}: cannot check/set {COM_OBL_RC_ACT}: {exc.result.name}"
             ) from exc
+
+    async def restore_params(self) -> None:
+        await self._journal.restore(self.params)
 
     def setpoint(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
@@ -169,6 +263,21 @@ class Px4FixedWingAdapter(OffboardControl):
             VelocityNedYaw(north_m_s=v_north, east_m_s=v_east, down_m_s=0.0, yaw_deg=yaw),
         )
 
+    def acceleration(self, setpoint: CourseSpeedCommand) -> AccelerationNed:
+        """The acceleration that makes PX4 feed forward the course's rate as the path's
+        curvature (mirrored for v1.16's sign, ``mirror_normal_accel``); vertical 0 (PX4's
+        fixed-wing controller ignores it)."""
+        north, east = normal_acceleration_ned(
+            setpoint.course_rad,
+            setpoint.speed_m_s,
+            setpoint.course_rate_rad_s,
+            self.limits.envelope.max_course_rate_rad_s,
+        )
+        if self.mirror_normal_accel:
+            north, east = -north, -east
+        check_finite({"a_north": north, "a_east": east}, "acceleration setpoint")
+        return AccelerationNed(north_m_s2=north, east_m_s2=east, down_m_s2=0.0)
+
     def speed_command(self, speed_m_s: float) -> MavlinkMessage:
         """MAV_CMD_DO_CHANGE_SPEED: param1 airspeed (0), param2 speed, param3 -1 (throttle kept)."""
         return command_long(
@@ -178,22 +287,73 @@ class Px4FixedWingAdapter(OffboardControl):
             (mavlink.SPEED_TYPE_AIRSPEED, speed_m_s, -1.0),
         )
 
-    async def _airspeed(self, speed_m_s: float) -> None:
-        sent = self._speed_sent
-        if sent is not None and abs(speed_m_s - sent) <= self.speed_deadband_m_s:
+    async def start(
+        self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
+    ) -> None:
+        self._speed_pending = True
+        await OffboardControl.start(self, setpoint, altitude_m, state)
+
+    async def _change_speed_once(self, speed_m_s: float) -> None:
+        if not self._speed_pending:
             return
         await send_checked_command(
             self.commands, self.speed_command(speed_m_s), self.vehicle_id, "DO_CHANGE_SPEED"
         )
-        self._speed_sent = speed_m_s
+        self._speed_pending = False
+
+    async def _trim_airspeed(self, speed_m_s: float, t_s: float) -> None:
+        """Fly ``speed_m_s`` by writing FW_AIRSPD_TRIM, at most once per ``trim_min_interval_s``
+        of vehicle time and only when it moved by more than ``trim_deadband_m_s``.
+
+        The cost, which is why it is off by default: every change is a PARAM_SET answered by a
+        PARAM_VALUE that PX4 broadcasts to every ground station (QGroundControl's parameter list
+        changes under the operator), stores in its parameter file (flash or SD card wear on
+        hardware) and logs; and the trim airspeed is more than a cruise setpoint: PX4 also
+        scales its attitude controllers' gains and TECS's throttle trim with it. The original
+        is written back by ``restore_params``; an app that dies first leaves the last value.
+        """
+        sent, sent_t = self._trim_sent, self._trim_sent_t_s
+        if sent is not None and abs(speed_m_s - sent) <= self.trim_deadband_m_s:
+            return
+        if sent_t is not None and 0.0 <= t_s - sent_t < self.trim_min_interval_s:
+            return
+        try:
+            await self.params.set_param_float(FW_AIRSPD_TRIM, speed_m_s)
+        except ParamError as exc:
+            raise LinkError(
+                f"vehicle {self.vehicle_id}: cannot set {FW_AIRSPD_TRIM} to {speed_m_s:g}: "
+                f"{exc.result.name}"
+            ) from exc
+        if self._trim_original is not None:
+            self._journal.record(FW_AIRSPD_TRIM, self._trim_original)
+        self._trim_sent, self._trim_sent_t_s = speed_m_s, t_s
 
     async def send(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
         position, velocity = self.setpoint(setpoint, altitude_m, state)
-        await offboard_call(
-            "position+velocity setpoint",
-            self.vehicle_id,
-            self.offboard.set_position_velocity_ned(position, velocity),
-        )
-        await self._airspeed(setpoint.speed_m_s)
+        if self.curvature_feed_forward:
+            acceleration = self.acceleration(setpoint)
+            await offboard_call(
+                "position+velocity+acceleration setpoint",
+                self.vehicle_id,
+                self.offboard.set_position_velocity_acceleration_ned(
+                    position, velocity, acceleration
+                ),
+            )
+        else:
+            await offboard_call(
+                "position+velocity setpoint",
+                self.vehicle_id,
+                self.offboard.set_position_velocity_ned(position, velocity),
+            )
+        await self._change_speed_once(setpoint.speed_m_s)
+        if self.airspeed_via_trim_param:
+            await self._trim_airspeed(setpoint.speed_m_s, state.t_s)
+
+
+#: what to ask of a PX4 whose link streams position slowly (a ``normal`` mode link)
+PX4_TELEMETRY_RATES_HZ: Final[Mapping[str, float]] = {
+    "GLOBAL_POSITION_INT": 10.0,
+    "LOCAL_POSITION_NED": 10.0,
+}

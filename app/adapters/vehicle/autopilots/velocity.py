@@ -28,13 +28,18 @@ class VelocityAdapter(OffboardControl):
     """Velocity + yaw setpoints (SET_POSITION_TARGET_LOCAL_NED, resent by MAVSDK at 20 Hz).
 
     The horizontal velocity is the course at the commanded speed, the yaw is the course, and the
-    vertical velocity closes the altitude error (saturated climb rate).
+    vertical velocity closes the altitude error (saturated climb rate). The speed is flown as
+    commanded (``honours_speed``); no parameter is changed, so there is none to restore.
     """
 
     vehicle_id: int
     offboard: OffboardPort
     limits: SetpointLimits
     name: AutopilotName = "velocity"
+
+    @property
+    def honours_speed(self) -> bool:
+        return True
 
     def mode_name(self, custom_mode: int) -> str:
         return px4_mode_name(custom_mode)
@@ -44,6 +49,9 @@ class VelocityAdapter(OffboardControl):
         return "OFFBOARD"
 
     async def prepare(self) -> None:
+        return None
+
+    async def restore_params(self) -> None:
         return None
 
     def setpoint(
