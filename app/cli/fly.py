@@ -5,6 +5,9 @@ import asyncio
 import contextlib
 import datetime as dt
 import math
+import sys
+import threading
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 from rich.console import Console
@@ -27,7 +30,10 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "Fly a cooperative standoff-tracking mission in one process: the vehicles (the "
             "built-in simulator unless --connect is given), the ground station and one agent "
             "per vehicle, over the in-process bus or MQTT (--broker). With no CONFIG: the "
-            "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder."
+            "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder. "
+            "While it flies, a vehicle whose mode someone else changed (RC, a ground-control "
+            "station, RTL, a failsafe) is left alone until you type 'resume N' (N: the vehicle "
+            "index the events print; 'resume' alone: every vehicle) and Enter; 'hold N' holds one."
         ),
     )
     add_mission_options(
@@ -44,6 +50,11 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
     p.add_argument("--speedup", type=float, help="built-in simulator speed-up factor")
     p.add_argument("--seed", type=int, help="built-in simulator's random seed")
     p.add_argument("--quiet", action="store_true", help="no live view")
+    p.add_argument(
+        "--no-stdin",
+        action="store_true",
+        help="do not read operator commands (resume N, hold N) from standard input",
+    )
     p.set_defaults(handler=run)
 
 
@@ -70,10 +81,31 @@ def run(args: argparse.Namespace) -> int:
                 broker_url=args.broker,
                 base_port=args.base_port,
                 on_snapshot=view.update if view is not None else None,
+                operator=None if args.no_stdin else stdin_lines(),
             ).run()
         )
     console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)
     return 0
+
+
+async def stdin_lines() -> AsyncIterator[str]:
+    """The operator's lines from standard input, read by a daemon thread (a blocked read never
+    holds up the exit, and the terminal's output stays blocking); ends at end of input."""
+    loop = asyncio.get_running_loop()
+    queue: asyncio.Queue[str | None] = asyncio.Queue()
+
+    def read() -> None:
+        try:
+            for line in sys.stdin:
+                loop.call_soon_threadsafe(queue.put_nowait, line)
+        except (OSError, ValueError, RuntimeError):
+            pass  # stdin closed, or the loop went away
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(queue.put_nowait, None)
+
+    threading.Thread(target=read, name="operator-stdin", daemon=True).start()
+    while (line := await queue.get()) is not None:
+        yield line
 
 
 def _fmt(value: object, spec: str = ".1f") -> str:

@@ -11,6 +11,14 @@ ground's ``shutdown`` or on SIGINT/SIGTERM; either way it stops commanding its v
 in hold at once (the link tries again as it closes if that was refused), then unwinds and says
 ``LinkState(online=False)`` before leaving the bus. A second signal to either process stops it at
 once (still closing its logs).
+
+Mission time: the ground station announces the mission's epoch (``MissionEpoch``, retained on
+``topics.MISSION_EPOCH``: the wall-clock time of mission time 0, once its simulator, if any, is
+up, and the clock rate); each agent waits for it before it opens its vehicle link, and maps its
+vehicle's boot clock onto ``(wall time - epoch) * rate``. The processes therefore agree on mission
+time to the accuracy of their hosts' clock sync (NTP), however long ago the vehicles booted. The
+ground marks the epoch ``ended`` as it leaves, so an agent started for the next mission waits for
+the next ground station (a ground that crashed leaves its epoch: start the ground first then).
 """
 
 import asyncio
@@ -32,6 +40,7 @@ from app.adapters.tlog import record_tlog
 from app.compose.parts import (
     MissionResult,
     bring_up,
+    clock_rate,
     counters_of,
     ground_station,
     open_links,
@@ -46,9 +55,9 @@ from app.runtime.agent import VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundStation, Measurement
 from app.runtime.ports import topics
-from app.runtime.ports.clock import SYSTEM_CLOCK, Clock
+from app.runtime.ports.clock import SYSTEM_CLOCK, Clock, MissionClock
 from app.runtime.ports.events import EventSink
-from app.runtime.ports.messages import Command, LinkState
+from app.runtime.ports.messages import Command, LinkState, MissionEpoch
 from app.runtime.ports.vehicle import VehicleLink
 from app.runtime.ports.view import MissionSnapshot
 from app.runtime.vehicle import prepare_vehicle
@@ -58,6 +67,7 @@ log = logging.getLogger(__name__)
 GROUND_CLIENT = "ground"
 SHUTDOWN_GRACE_S = 15.0  # wall time the ground waits for the agents to hold and go offline
 HOLD_TIMEOUT_S = 5.0  # wall time a stopping agent waits for its vehicle to accept the hold
+EPOCH_TIMEOUT_S = 120.0  # wall time an agent waits for the ground station's mission epoch
 # reconnect tries at most every second: a mission's broker is back within ~1 s of its return
 BUS_BACKOFF = Backoff(initial_s=0.1, factor=2.0, max_s=1.0)
 
@@ -301,6 +311,14 @@ async def run_ground(
                 )
                 ports = f"{sitl_base_port}..{sitl_base_port + plan.count - 1}"
                 notify(f"built-in simulator running: {plan.count} vehicles on UDP ports {ports}")
+            epoch = MissionEpoch(
+                sender=GROUND_CLIENT,
+                t_s=0.0,
+                epoch_s=clock.time_s(),
+                rate=clock_rate(plan, builtin),
+            )
+            await bus.publish(topics.MISSION_EPOCH, epoch, qos=1, retain=True)
+            stack.push_async_callback(_end_epoch, bus, epoch)
             events.emit(
                 "mission_start",
                 0.0,
@@ -308,6 +326,8 @@ async def run_ground(
                 vehicles=plan.count,
                 bus=_broker_name(broker_url),
                 simulator=sitl_base_port,
+                epoch_s=epoch.epoch_s,
+                clock_rate=epoch.rate,
             )
             ground = ground_station(
                 plan,
@@ -347,6 +367,32 @@ async def run_ground(
         wall_s = clock.monotonic_s() - wall_start
         result = write_outputs(plan, out_dir, ground, eventlog, {}, wall_s, interrupted)
     return result
+
+
+async def _end_epoch(bus: Bus, epoch: MissionEpoch) -> None:
+    """Mark the retained epoch ended (a broker out of reach is logged: the ground is leaving)."""
+    try:
+        ended = epoch.model_copy(update={"ended": True})
+        await bus.publish(topics.MISSION_EPOCH, ended, qos=1, retain=True)
+    except BusError as exc:
+        log.warning("ground could not mark its mission epoch ended: %s", exc)
+
+
+async def wait_for_epoch(
+    subscription: Subscription, clock: Clock, timeout_s: float = EPOCH_TIMEOUT_S
+) -> MissionClock:
+    """The mission clock the ground station announced (its retained ``MissionEpoch``)."""
+    try:
+        async with asyncio.timeout(timeout_s):
+            async for _topic, message in subscription:
+                if isinstance(message, MissionEpoch) and not message.ended:
+                    return MissionClock(message.epoch_s, message.rate, clock.time_s)
+    except TimeoutError as exc:
+        raise LinkError(
+            f"no mission epoch from the ground station within {timeout_s:.0f} s: start "
+            "'standoff ground' on the same broker"
+        ) from exc
+    raise BusError("the bus closed before the ground station's mission epoch arrived")
 
 
 def _mission_t(ground: GroundStation) -> float:
@@ -475,10 +521,11 @@ async def run_agent(
         stack.enter_context(stop_on_signals(stop))
         bus = await stack.enter_async_context(_mission_bus(broker_url, name, vehicle))
         commands = await stack.enter_async_context(bus.subscribe(topics.ALL_COMMANDS))
+        epochs = await stack.enter_async_context(bus.subscribe(topics.MISSION_EPOCH))
         events.emit(
             "agent_start", 0.0, vehicle=vehicle, url=connect_url, bus=_broker_name(broker_url)
         )
-        flight = _Flight(plan, vehicle, bus, events, notify, clock)
+        flight = _Flight(plan, vehicle, bus, events, notify, clock, epochs)
         try:
             async with _plain_errors(), asyncio.TaskGroup() as tg:
                 listener = tg.create_task(
@@ -548,9 +595,11 @@ class _Flight:
         events: EventSink,
         notify: Notify,
         clock: Clock,
+        epochs: Subscription,
     ) -> None:
         self._plan = plan
         self._clock = clock
+        self._epochs = epochs
         self._vehicle = vehicle
         self._bus = bus
         self._events = events
@@ -573,6 +622,9 @@ class _Flight:
         link, agent = self._link, self._agent
         if link is None or agent is None:
             return False
+        if agent.pilot_has_control:
+            self._events.emit("hold", self.last_t_s, vehicle=self._vehicle, reason="left to pilot")
+            return True  # left in the mode its pilot chose
         agent.stand_down()
         i = self._vehicle
         try:
@@ -596,11 +648,18 @@ class _Flight:
 
     async def fly(self, url: str, out_dir: Path, builtin: bool) -> None:
         plan, i = self._plan, self._vehicle
+        self._notify(f"agent {i}: waiting for the ground station's mission epoch")
+        mission_clock = await wait_for_epoch(self._epochs, self._clock)
+        self._events.emit(
+            "mission_epoch", 0.0, vehicle=i, epoch_s=mission_clock.epoch_s, rate=mission_clock.rate
+        )
         self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
         async with AsyncExitStack() as stack:
-            links = await stack.enter_async_context(open_links(plan, [url], [i], builtin))
+            links = await stack.enter_async_context(
+                open_links(plan, [url], [i], builtin, mission_clock)
+            )
             link = self._link = links[i]
-            await prepare_vehicle(link, bring_up(plan), self._events)
+            await prepare_vehicle(link, bring_up(plan, i), self._events)
             self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
             tlog = stack.enter_context(tlog_writer(out_dir, i, self._clock))
             self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin)

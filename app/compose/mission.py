@@ -4,11 +4,17 @@
 clients, logs), brings each vehicle to offboard control, runs the ground station and one agent
 per vehicle until the scenario ends, and writes the run folder. Leaving it in any way (the end,
 an error, Ctrl-C) puts every vehicle in hold and closes every log.
+
+Mission time: 0 is when the vehicles are there to fly (the built-in simulator's start, or the
+launch with external vehicles), on the host's monotonic clock times the clock rate (the
+simulator's speed-up); every link maps its vehicle's boot clock onto it. ``operator``: lines an
+operator types (``resume [N ...]``, ``hold [N ...]``; N the vehicle index as the events print
+it, none: every vehicle), published as bus commands to the agents.
 """
 
 import asyncio
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AsyncExitStack
 from pathlib import Path
 
@@ -19,6 +25,7 @@ from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.compose.parts import (
     MissionResult,
     bring_up,
+    clock_rate,
     ground_station,
     open_links,
     tlog_writer,
@@ -32,9 +39,9 @@ from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundStation, Measurement
 from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus
-from app.runtime.ports.clock import SYSTEM_CLOCK, Clock
+from app.runtime.ports.clock import SYSTEM_CLOCK, Clock, MissionClock
 from app.runtime.ports.events import EventSink
-from app.runtime.ports.messages import LinkState
+from app.runtime.ports.messages import Command, LinkState
 from app.runtime.ports.vehicle import VehicleLink
 from app.runtime.ports.view import MissionSnapshot
 from app.runtime.vehicle import hold_all, prepare_vehicle
@@ -65,6 +72,7 @@ class Mission:
         on_snapshot: Callable[[MissionSnapshot], None] | None = None,
         simulator: SimulatorServer | None = None,
         clock: Clock = SYSTEM_CLOCK,
+        operator: AsyncIterator[str] | None = None,
     ) -> None:
         cfg = plan.config
         self.plan = plan
@@ -87,6 +95,8 @@ class Mission:
         self._on_snapshot = on_snapshot
         self._simulator = simulator
         self._clock = clock
+        self._operator = operator
+        self.mission_clock: MissionClock | None = None
 
     async def run(self) -> MissionResult:
         """Fly the plan to its end; write and return the run's results (also when interrupted)."""
@@ -134,6 +144,7 @@ class Mission:
         """Open the parts on ``stack`` and fly (``interrupted`` when cancelled in flight)."""
         plan, cfg = self.plan, self.plan.config
         urls = await self._vehicle_urls(stack)
+        self.mission_clock = self._start_clock()
         events.emit(
             "mission_start",
             0.0,
@@ -143,13 +154,13 @@ class Mission:
             bus=self.broker_url or "in-process",
         )
         self.links = await stack.enter_async_context(
-            open_links(plan, urls, range(plan.count), self.builtin)
+            open_links(plan, urls, range(plan.count), self.builtin, self.mission_clock)
         )
-        bring = bring_up(plan)
         async with asyncio.TaskGroup() as tg:
-            for link in self.links.values():
+            for i, link in self.links.items():
                 tg.create_task(
-                    prepare_vehicle(link, bring, events), name=f"prepare-{link.vehicle_id}"
+                    prepare_vehicle(link, bring_up(plan, i), events),
+                    name=f"prepare-{link.vehicle_id}",
                 )
         broker = InProcessBroker() if self.broker_url is None else None
 
@@ -186,6 +197,16 @@ class Mission:
                     tg.create_task(record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
                     for i, link in self.links.items()
                 ]
+                if self._operator is not None:
+                    operator_bus = await client("operator")
+                    helpers.append(
+                        tg.create_task(
+                            relay_operator(
+                                self._operator, operator_bus, events, plan.count, self._now
+                            ),
+                            name="operator",
+                        )
+                    )
                 await ground.run()
                 # the end: hold every vehicle while its agent still streams setpoints, so
                 # no autopilot sees offboard setpoints stop before it is told to hold
@@ -198,3 +219,59 @@ class Mission:
             self.interrupted = True
             events.emit("interrupted", ground.state.mission_t_s)
             raise
+
+    def _now(self) -> float:
+        return self.mission_clock.now_s() if self.mission_clock is not None else 0.0
+
+    def _start_clock(self) -> MissionClock:
+        """Mission time 0: the given simulator's time 0, else now (the vehicles are there)."""
+        rate = clock_rate(self.plan, self.builtin)
+        host = self._clock.monotonic_s
+        if self._simulator is not None:
+            return MissionClock(host() - self._simulator.time_s / rate, rate, host)
+        return MissionClock.starting_now(rate, host)
+
+
+def parse_operator_line(line: str, vehicles: int) -> Command | None:
+    """An operator's line as a bus command: ``resume``/``hold`` with optional vehicle indices
+    (0-based, as the events print them); None for a blank line; ``ValueError`` otherwise."""
+    words = line.split()
+    if not words:
+        return None
+    verb, args = words[0].lower(), words[1:]
+    if verb not in ("resume", "hold"):
+        raise ValueError(f"unknown command {verb!r}: type 'resume [N ...]' or 'hold [N ...]'")
+    try:
+        chosen = tuple(int(a) for a in args)
+    except ValueError:
+        raise ValueError(f"vehicle indices are numbers 0..{vehicles - 1}, got {args}") from None
+    if any(not 0 <= v < vehicles for v in chosen):
+        raise ValueError(f"vehicle indices are 0..{vehicles - 1}, got {list(chosen)}")
+    return Command(
+        sender="operator",
+        t_s=0.0,
+        command="resume" if verb == "resume" else "hold",
+        vehicles=chosen or None,
+    )
+
+
+async def relay_operator(
+    lines: AsyncIterator[str],
+    bus: Bus,
+    events: EventSink,
+    vehicles: int,
+    now: Callable[[], float] = lambda: 0.0,
+) -> None:
+    """Publish each operator line as a command to the agents (stamped ``now()``, mission time);
+    a bad line is logged and skipped."""
+    async for line in lines:
+        try:
+            command = parse_operator_line(line, vehicles)
+        except ValueError as exc:
+            log.warning("operator: %s", exc)
+            continue
+        if command is None:
+            continue
+        t = now()
+        events.emit("operator_command", t, command=command.command, vehicles=command.vehicles)
+        await bus.publish(topics.command(), command.model_copy(update={"t_s": t}), qos=1)

@@ -41,16 +41,23 @@ class MissionResult:
     interrupted: bool = False
 
 
-def bring_up(plan: MissionPlan) -> BringUp:
-    """How this mission brings each vehicle to offboard control (``prepare_vehicle``)."""
+def bring_up(plan: MissionPlan, vehicle: int) -> BringUp:
+    """How this mission brings vehicle ``vehicle`` (0-based) to offboard control
+    (``prepare_vehicle``): at its own altitude of the stack, handed over only in the air."""
     cfg = plan.config
+    min_airspeed = cfg.link.handover_min_airspeed_m_s
     return BringUp(
         connect_timeout_s=cfg.link.connect_timeout_s,
         take_off_timeout_s=cfg.link.take_off_timeout_s,
-        altitude_m=cfg.link.altitude_m,
+        altitude_m=cfg.link.vehicle_altitude_m(vehicle),
         cruise_speed_m_s=cfg.limits.cruise_speed_m_s,
         origin_lat_deg=cfg.origin.lat_deg,
         origin_lon_deg=cfg.origin.lon_deg,
+        handover_min_height_m=cfg.link.handover_min_height_m,
+        handover_min_airspeed_m_s=min_airspeed
+        if min_airspeed is not None
+        else cfg.limits.min_speed_m_s,
+        handover_timeout_s=cfg.link.handover_timeout_s,
     )
 
 
@@ -62,20 +69,33 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
     if builtin:
         autopilot = autopilot or "velocity"
     return LinkConfig(
-        plan.setpoint_limits, autopilot=autopilot, link_timeout_s=cfg.link.link_timeout_s
+        plan.setpoint_limits,
+        autopilot=autopilot,
+        link_timeout_s=cfg.link.link_timeout_s,
+        clock_window_s=cfg.link.clock_window_s,
     )
+
+
+def clock_rate(plan: MissionPlan, builtin: bool) -> float:
+    """Mission seconds per host second: the built-in simulator's speed-up, else 1."""
+    return plan.config.sim.speedup if builtin else 1.0
 
 
 @asynccontextmanager
 async def open_links(
-    plan: MissionPlan, urls: Sequence[str], vehicles: Sequence[int], builtin: bool
+    plan: MissionPlan,
+    urls: Sequence[str],
+    vehicles: Sequence[int],
+    builtin: bool,
+    mission_clock: Callable[[], float] | None = None,
 ) -> AsyncIterator[dict[int, VehicleLink]]:
-    """One MAVSDK hub on ``urls`` and a link to each of ``vehicles`` (0-based: system id i+1)."""
+    """One MAVSDK hub on ``urls`` and a link to each of ``vehicles`` (0-based: system id i+1),
+    every vehicle's boot clock mapped onto ``mission_clock`` (``MissionClock``)."""
     cfg = plan.config
     origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
     config = link_config(plan, builtin)
     async with AsyncExitStack() as stack:
-        hub = await stack.enter_async_context(MavsdkHub(urls, origin))
+        hub = await stack.enter_async_context(MavsdkHub(urls, origin, mission_clock=mission_clock))
         links: dict[int, VehicleLink] = {}
         for i in vehicles:
             links[i] = await stack.enter_async_context(
@@ -125,8 +145,8 @@ def ground_station(
 def vehicle_agent(
     plan: MissionPlan, vehicle: int, link: VehicleLink, bus: Bus, events: EventSink, builtin: bool
 ) -> VehicleAgent:
-    """Vehicle ``vehicle``'s agent; on the built-in simulator its clock runs ``speedup`` times
-    the host's."""
+    """Vehicle ``vehicle``'s agent, at its own altitude of the stack; on the built-in
+    simulator its clock runs ``speedup`` times the host's."""
     cfg = plan.config
     return VehicleAgent(
         plan.agents[vehicle],
@@ -134,7 +154,7 @@ def vehicle_agent(
         bus,
         events,
         AgentRuntimeParams(
-            altitude_m=cfg.link.altitude_m, clock_rate=cfg.sim.speedup if builtin else 1.0
+            altitude_m=cfg.link.vehicle_altitude_m(vehicle), clock_rate=clock_rate(plan, builtin)
         ),
     )
 
@@ -199,6 +219,9 @@ def write_outputs(
             },
             "agents": {str(a.params.vehicle): dataclasses.asdict(a.counters) for a in agents},
             "fusion": _fusion_counters(ground),
+            "vehicle_altitudes_m": {
+                str(i): plan.config.link.vehicle_altitude_m(i) for i in range(plan.count)
+            },
         },
     )
     return MissionResult(out_dir, summary, samples, interrupted)

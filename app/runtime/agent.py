@@ -6,8 +6,12 @@ straight back to the vehicle, then ``Telemetry`` (the status, when due, to the b
 camera's observations feed the local filter (``Observed``, the local estimate out when due) and
 are published for the ground station; the fused estimate, the mission state and the teammates'
 statuses arrive from the bus. Nothing here blocks the control path: a refused command is logged
-and counted, a vehicle that left offboard is put back under control at most every
-``retry_offboard_s``, a malformed message never reaches this loop (the bus drops it).
+and counted, a malformed message never reaches this loop (the bus drops it).
+
+The pilot always wins: a vehicle whose mode someone else changed (RC, a ground-control station,
+RTL, a failsafe) is left in that mode; the agent sends it nothing, reports it (the event
+``pilot_took_over``, a warning on the terminal, ``control="pilot"`` in its bus status) and takes
+it back only on an explicit ``resume`` command.
 
 Only the newest fused estimate is applied: its subscription holds one message, so one that
 arrives while an older one waits replaces it (``FUSED_QUEUE``).
@@ -28,6 +32,7 @@ from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus, Subscription
 from app.runtime.ports.events import EventSink
 from app.runtime.ports.vehicle import (
+    ClockRebased,
     CourseSpeedCommand,
     LeftOffboard,
     LinkLost,
@@ -61,7 +66,6 @@ class AgentRuntimeParams:
     altitude_m: float | None = None
     status_period_s: float = 0.1
     estimate_period_s: float = 0.2
-    retry_offboard_s: float = 2.0
     merge_window_s: float = 0.3
     clock_rate: float = 1.0
     load_window_s: float = 10.0
@@ -73,7 +77,8 @@ class AgentRuntimeParams:
 class AgentCounters:
     ticks: int = 0
     commands_refused: int = 0
-    offboard_restarts: int = 0
+    offboard_restarts: int = 0  # taken back on a ``resume`` after the pilot took over
+    pilot_takeovers: int = 0  # times someone else changed the vehicle's mode
     observations_used: int = 0
     observations_dropped: int = 0
     observations_merged: int = 0  # queued observations folded into another (merge_backlog)
@@ -112,9 +117,14 @@ class VehicleAgent:
         self._bus = bus_client
         self._events = events
         self._runtime = runtime
-        self._next_offboard_retry_t = -math.inf
+        self._pilot_mode: str | None = None  # the mode someone else put the vehicle in
         self._last_t = 0.0
         self._load = _LoadWindow()
+
+    @property
+    def pilot_has_control(self) -> bool:
+        """Someone else changed the vehicle's mode and no ``resume`` has come since."""
+        return self._pilot_mode is not None
 
     def stand_down(self) -> None:
         """Stop commanding the vehicle (the mission is about to put it in hold)."""
@@ -172,11 +182,14 @@ class VehicleAgent:
                 self._events.emit(
                     event.kind, event.t_s, vehicle=self.params.vehicle, detail=event.detail
                 )
-            if out.command is not None:
+            if out.command is not None and self._pilot_mode is None:
                 await self._send(
                     t,
                     CourseSpeedCommand(
-                        out.command.course_rad, out.command.speed_m_s, self._runtime.altitude_m
+                        out.command.course_rad,
+                        out.command.speed_m_s,
+                        self._runtime.altitude_m,
+                        course_rate_rad_s=out.command.course_rate_ff_rad_s,
                     ),
                 )
             self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
@@ -228,22 +241,34 @@ class VehicleAgent:
     async def _send(self, t: float, command: CourseSpeedCommand) -> None:
         try:
             await self._link.send(command)
-        except OffboardLostError as exc:
-            if t >= self._next_offboard_retry_t:
-                self._next_offboard_retry_t = t + self._runtime.retry_offboard_s
-                self.counters.offboard_restarts += 1
-                self._events.emit(
-                    "offboard_restart", t, vehicle=self.params.vehicle, reason=str(exc)
-                )
-                try:
-                    await self._link.start_offboard(command)
-                except LinkError as retry_exc:
-                    self._events.emit(
-                        "offboard_refused", t, vehicle=self.params.vehicle, reason=str(retry_exc)
-                    )
+        except OffboardLostError:
+            latest = self._link.latest
+            self._took_over(latest.flight_mode if latest is not None else "UNKNOWN", t)
         except LinkError as exc:
             self.counters.commands_refused += 1
             self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
+
+    def _took_over(self, mode: str, t: float) -> None:
+        """Someone else changed the vehicle's mode: leave it there, say so, send nothing."""
+        if self._pilot_mode is not None or self.state.holding:
+            return
+        self._pilot_mode = mode
+        self.counters.pilot_takeovers += 1
+        v = self.params.vehicle
+        log.warning(
+            "vehicle %d (system id %d) was put in %s by someone else: the mission leaves it "
+            "there and sends it nothing until 'resume %d'",
+            v,
+            v + 1,
+            mode,
+            v,
+        )
+        self._events.emit("pilot_took_over", t, vehicle=v, flight_mode=mode)
+
+    def _control_state(self) -> str:
+        if self._pilot_mode is not None:
+            return "pilot"
+        return "hold" if self.state.holding else "mission"
 
     async def _publish_status(self, status: logic.AgentStatus) -> None:
         latest = self._link.latest
@@ -260,6 +285,8 @@ class VehicleAgent:
             stage=status.stage,
             link="ok" if self._link.link_ok else "lost",
             healthy=status.healthy,
+            control=self._control_state(),
+            flight_mode=(latest.flight_mode if latest is not None else "")[:40],
         )
         await self._bus.publish(topics.status(self.params.vehicle), message)
 
@@ -378,7 +405,10 @@ class VehicleAgent:
         try:
             if message.command in ("hold", "shutdown"):
                 self.state, _ = logic.step(self.state, logic.Hold(True), self.params)
-                await self._link.hold()
+                if self._pilot_mode is None:  # a vehicle the pilot has stays in their mode
+                    await self._link.hold()
+            elif message.command == "resume" and self._pilot_mode is not None:
+                await self._take_back(t)
             elif message.command == "resume" and self.state.holding:
                 self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
                 latest = self._link.latest
@@ -393,6 +423,21 @@ class VehicleAgent:
         except LinkError as exc:
             self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
 
+    async def _take_back(self, t: float) -> None:
+        """``resume`` after the pilot took over: offboard again from the vehicle's course."""
+        latest = self._link.latest
+        course = latest.course_rad if latest is not None else 0.0
+        await self._link.start_offboard(
+            CourseSpeedCommand(
+                course, self.params.agent.envelope.cruise_speed_m_s, self._runtime.altitude_m
+            )
+        )
+        mode, self._pilot_mode = self._pilot_mode, None
+        if self.state.holding:  # a hold asked for meanwhile is over too
+            self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
+        self.counters.offboard_restarts += 1
+        self._events.emit("resumed", t, vehicle=self.params.vehicle, from_mode=mode)
+
     async def _link_events(self) -> None:
         async for event in self._link.events():
             match event:
@@ -404,6 +449,21 @@ class VehicleAgent:
                     self._events.emit("link_restored", event.t_s, vehicle=self.params.vehicle)
                 case LeftOffboard() if self.state.holding:
                     pass  # the hold this agent stood down for, not the vehicle leaving on its own
+                case LeftOffboard():
+                    self._events.emit(
+                        "LeftOffboard", event.t_s, vehicle=self.params.vehicle, detail=repr(event)
+                    )
+                    self._took_over(event.flight_mode, event.t_s)
+                case ClockRebased():
+                    self._events.emit(
+                        "clock_rebased",
+                        event.t_s,
+                        vehicle=self.params.vehicle,
+                        reason=event.reason,
+                        boot_s=event.boot_s,
+                        previous_boot_s=event.previous_boot_s,
+                        offset_s=round(event.offset_s, 3),
+                    )
                 case _:
                     self._events.emit(
                         type(event).__name__,

@@ -125,6 +125,7 @@ class GroundStation:
         self._sources = list(sources)
         self._external = external_observations
         self._on_snapshot = on_snapshot
+        self._piloted: set[int] = set()
 
     async def run(self) -> None:
         try:
@@ -144,6 +145,7 @@ class GroundStation:
         async for _topic, message in subscription:
             match message:
                 case bus.VehicleStatus():
+                    self._note_control(message)
                     report = logic.VehicleReport(
                         message.t_s,
                         message.east_m,
@@ -151,7 +153,9 @@ class GroundStation:
                         message.course_rad,
                         message.speed_m_s,
                         link_ok=message.link == "ok",
-                        healthy=message.healthy,
+                        # flown by its pilot: heard (not lost), but out of the formation until
+                        # its agent is told to resume
+                        healthy=message.healthy and message.control != "pilot",
                     )
                     heard = logic.HeardStatuses(((message.vehicle, report),))
                     self.state, out = logic.step(self.state, heard, self.params, self._truth)
@@ -162,6 +166,25 @@ class GroundStation:
                     self.state, _ = logic.step(self.state, local, self.params)
                 case _:
                     pass
+
+    def _note_control(self, message: bus.VehicleStatus) -> None:
+        """An event when a vehicle's pilot takes it (or the mission takes it back)."""
+        v, piloted = message.vehicle, message.control == "pilot"
+        if piloted == (v in self._piloted):
+            return
+        if piloted:
+            self._piloted.add(v)
+            self._events.emit(
+                "vehicle_with_pilot",
+                message.t_s,
+                vehicle=v,
+                flight_mode=message.flight_mode,
+                detail=f"vehicle {v} is flown by its pilot ({message.flight_mode}): out of the "
+                "formation, not lost",
+            )
+        else:
+            self._piloted.discard(v)
+            self._events.emit("vehicle_back_from_pilot", message.t_s, vehicle=v)
 
     async def _relay_external(self, topic_filter: str) -> None:
         """Observations published on another topic (an external tracker) go to their vehicle."""

@@ -1,5 +1,7 @@
 """``prepare_vehicle``: the steps before a vehicle flies the mission, on a fake link."""
 
+from dataclasses import replace
+
 import pytest
 
 from app.compose.parts import bring_up
@@ -50,6 +52,10 @@ class FakeLink:
 
     async def take_off(self, timeout_s: float) -> None:
         self.steps.append("take-off")
+        # climbed out: above the hand-over height, at flying speed
+        self.latest = replace(
+            self.frame, relative_altitude_m=60.0, ground_speed_m_s=16.0, in_air=True
+        )
 
     async def start_offboard(self, first: CourseSpeedCommand) -> None:
         self.steps.append("offboard")
@@ -66,9 +72,9 @@ class Events:
 async def test_a_vehicle_near_the_origin_is_armed_launched_and_put_in_offboard():
     plan = build_plan(load_config("hil", MissionConfig))
     link, events = FakeLink(frame_at(-1200.0, 300.0)), Events()
-    await prepare_vehicle(link, bring_up(plan), events)  # type: ignore[arg-type]
+    await prepare_vehicle(link, bring_up(plan, 1), events)  # type: ignore[arg-type]
     assert link.steps == ["ready", "arm", "take-off", "offboard"]
-    assert events.kinds == ["offboard"]
+    assert events.kinds == ["handover", "offboard"]
 
 
 async def test_a_vehicle_far_from_the_mission_origin_is_refused_before_it_is_armed():
@@ -76,5 +82,5 @@ async def test_a_vehicle_far_from_the_mission_origin_is_refused_before_it_is_arm
     plan = build_plan(load_config("hil", MissionConfig))
     link = FakeLink(frame_at(-2.744e6, 1.855e6))
     with pytest.raises(LinkError, match=r"vehicle 2 is 3312 km from the mission's origin"):
-        await prepare_vehicle(link, bring_up(plan), Events())  # type: ignore[arg-type]
+        await prepare_vehicle(link, bring_up(plan, 1), Events())  # type: ignore[arg-type]
     assert link.steps == ["ready"]

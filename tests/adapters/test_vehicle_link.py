@@ -12,6 +12,7 @@ from mavsdk.plugins.action import ActionError, ActionResult
 
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
+from app.adapters.vehicle.mavsdk import telemetry
 from app.adapters.vehicle.mavsdk.broadcast import Broadcast
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
@@ -20,6 +21,7 @@ from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.core.plant import VehicleEnvelope
 from app.errors import ConfigError, LinkError
 from app.runtime.ports.vehicle import (
+    ClockRebased,
     CourseSpeedCommand,
     GeodeticOrigin,
     LinkLost,
@@ -205,6 +207,106 @@ async def test_out_of_order_frames_are_dropped_and_a_reboot_is_an_event():
     assert rebooted.t_s == 1.0
     vehicle._events.close()
     assert [event async for event in events] == [VehicleClockReset(4, 1.0, 20.0)]
+
+
+class HostClock:
+    """Mission time on the host, set by the test."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def mapped(host: HostClock) -> MavsdkVehicleLink:
+    return MavsdkVehicleLink(None, 4, ORIGIN, CONFIG, mission_clock=host)
+
+
+def test_boot_clocks_seconds_and_minutes_apart_give_one_mission_time():
+    host = HostClock()
+    # booted 2.1 s, 4.4 s and 3 minutes before mission time 0
+    links = [mapped(host) for _ in range(3)]
+    booted = (2.1, 4.4, 180.0)
+    for k in range(100):
+        host.now_s = 0.1 * k
+        for i, (vehicle, boot0) in enumerate(zip(links, booted, strict=True)):
+            delay = 0.001 * ((7 * k + 3 * i) % 20)  # 0-19 ms of transport jitter
+            host.now_s = 0.1 * k + delay
+            frame = vehicle._frame(position(round(1000 * (boot0 + 0.1 * k))))
+            assert frame is not None
+            vehicle._latest = frame
+    times = [vehicle._latest.t_s for vehicle in links if vehicle._latest is not None]
+    assert max(times) - min(times) < 0.02
+    assert times[0] == pytest.approx(9.9, abs=0.02)
+
+
+async def test_a_reboot_rebases_the_mapped_clock_and_mission_time_goes_on():
+    host = HostClock()
+    vehicle = mapped(host)
+    events = vehicle.events()
+    for k in range(50):
+        host.now_s = 0.1 * k + 0.002
+        frame = vehicle._frame(position(300_000 + 100 * k))
+        assert frame is not None
+        vehicle._latest = frame
+    assert vehicle._frame(position(304_800)) is None  # a late packet is still dropped
+    host.now_s = 4.9 + 10.0  # 10 s later it has rebooted: its clock restarts at 0.8 s
+    rebooted = vehicle._frame(position(800))
+    assert rebooted is not None
+    assert rebooted.t_s == pytest.approx(14.9)
+    vehicle._latest = rebooted
+    host.now_s = 15.0 + 0.003
+    after = vehicle._frame(position(900))
+    assert after is not None
+    assert after.t_s == pytest.approx(15.0)
+    assert vehicle.counters.clock_rebases == 1
+    vehicle._events.close()
+    [event] = [event async for event in events]
+    assert isinstance(event, ClockRebased)
+    assert (event.reason, event.boot_s, event.previous_boot_s) == ("reboot", 0.8, 304.9)
+    assert event.t_s == pytest.approx(14.9)
+
+
+def test_the_airspeed_of_vfr_hud_reaches_the_frames():
+    vehicle = link()
+    assert vehicle._frame(position(1_000)).airspeed_m_s is None  # type: ignore[union-attr]
+    vehicle._airspeed_m_s = telemetry.vfr_hud_airspeed({"airspeed": 16.5})
+    assert vehicle._frame(position(1_100)).airspeed_m_s == 16.5  # type: ignore[union-attr]
+    assert telemetry.vfr_hud_airspeed({"airspeed": float("nan")}) is None
+    with pytest.raises(KeyError):
+        telemetry.vfr_hud_airspeed({})
+
+
+class RestoringAdapter:
+    def __init__(self, fail: bool = False) -> None:
+        self.fail = fail
+        self.restored = 0
+
+    async def restore_params(self) -> None:
+        self.restored += 1
+        if self.fail:
+            raise LinkError("param set refused")
+
+
+@pytest.mark.parametrize("fail", [False, True])
+async def test_the_parameters_are_restored_on_exit_and_a_failure_is_logged(fail, caplog):
+    vehicle = link()
+    adapter = RestoringAdapter(fail)
+    vehicle._adapter = adapter  # type: ignore[assignment]
+    vehicle._link_ok = True
+    await vehicle.__aexit__(None, None, None)
+    assert adapter.restored == 1
+    assert ("restoring its parameters failed" in caplog.text) is fail
+
+
+async def test_a_lost_link_restores_nothing_and_says_so(caplog):
+    vehicle = link()
+    adapter = RestoringAdapter()
+    vehicle._adapter = adapter  # type: ignore[assignment]
+    await vehicle.__aexit__(None, None, None)
+    assert adapter.restored == 0
+    assert "parameters the mission changed are not restored" in caplog.text
 
 
 def geo_status(**changes: Any) -> dict[str, Any]:

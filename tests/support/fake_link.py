@@ -1,5 +1,7 @@
 """A vehicle link for tests of the agent loop: fed by the test through queues, silent where the
-test puts nothing (a stream with nothing queued waits forever), every command accepted."""
+test puts nothing (a stream with nothing queued waits forever), every command accepted unless
+the test made the vehicle leave offboard (``leave_offboard``: ``send`` then raises, as a real
+link's does, until ``start_offboard``)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,9 @@ from collections.abc import AsyncIterator
 
 from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
+    LeftOffboard,
     LinkEvent,
+    OffboardLostError,
     TargetObservation,
     VehicleTelemetry,
 )
@@ -16,7 +20,8 @@ from app.runtime.ports.vehicle import (
 
 class QueueLink:
     """``put`` a telemetry frame (it becomes ``latest``, as on a real link whose reader ran
-    while the agent was busy) and ``seen`` camera fixes; ``sent`` counts the setpoints."""
+    while the agent was busy) and ``seen`` camera fixes; ``sent`` counts the setpoints and
+    ``commands`` keeps them, ``offboard_starts`` and ``holds`` count those calls."""
 
     vehicle_id = 1
     autopilot_name = "fake"
@@ -27,6 +32,11 @@ class QueueLink:
         self.seen: asyncio.Queue[TargetObservation] = asyncio.Queue()
         self.latest: VehicleTelemetry | None = None
         self.sent = 0
+        self.commands: list[CourseSpeedCommand] = []
+        self.offboard_starts = 0
+        self.holds = 0
+        self.mode = "OFFBOARD"
+        self.link_events: asyncio.Queue[LinkEvent] = asyncio.Queue()
 
     def put(self, frame: VehicleTelemetry) -> None:
         self.latest = frame
@@ -39,12 +49,24 @@ class QueueLink:
 
     async def take_off(self, timeout_s: float) -> None: ...
 
-    async def start_offboard(self, first: CourseSpeedCommand) -> None: ...
+    def leave_offboard(self, mode: str, t_s: float) -> None:
+        """Someone else put the vehicle in ``mode``: the event, and ``send`` refused."""
+        self.mode = mode
+        self.link_events.put_nowait(LeftOffboard(self.vehicle_id, t_s, mode))
+
+    async def start_offboard(self, first: CourseSpeedCommand) -> None:
+        self.offboard_starts += 1
+        self.mode = "OFFBOARD"
+        self.commands.append(first)
 
     async def send(self, command: CourseSpeedCommand) -> None:
+        if self.mode != "OFFBOARD":
+            raise OffboardLostError(f"vehicle {self.vehicle_id} left offboard (now {self.mode})")
         self.sent += 1
+        self.commands.append(command)
 
-    async def hold(self) -> None: ...
+    async def hold(self) -> None:
+        self.holds += 1
 
     async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
         while True:
@@ -55,8 +77,8 @@ class QueueLink:
             yield await self.seen.get()
 
     async def events(self) -> AsyncIterator[LinkEvent]:
-        await asyncio.Event().wait()
-        yield  # type: ignore[misc]  # never reached: no events
+        while True:
+            yield await self.link_events.get()
 
 
 def frame(t_s: float, east_m: float, north_m: float, **changes: object) -> VehicleTelemetry:

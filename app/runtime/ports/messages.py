@@ -222,6 +222,10 @@ class VehicleStatus(Message):
     link: Literal["ok", "degraded", "lost"]  # the agent's MAVLink link to its vehicle
     healthy: bool
     detail: Annotated[str, Field(max_length=200)] = ""
+    # who flies the vehicle: the mission; its pilot (someone else changed its mode, named in
+    # ``flight_mode``: the agent sends nothing until ``resume``); or a hold the mission asked for
+    control: Literal["mission", "pilot", "hold"] = "mission"
+    flight_mode: Annotated[str, Field(max_length=40)] = ""
 
 
 class LinkState(Message):
@@ -231,6 +235,17 @@ class LinkState(Message):
     online: bool
     vehicle: VehicleId | None = None
     reason: Annotated[str, Field(max_length=200)] = ""
+
+
+class MissionEpoch(Message):
+    """Ground -> agents (retained): mission time 0 on the wall clock (Unix s) and the mission
+    seconds per wall second, so that every process maps its vehicles' boot clocks onto one
+    mission clock. ``ended``: the mission this epoch belonged to is over (wait for a new one)."""
+
+    kind: Literal["epoch"] = "epoch"
+    epoch_s: Finite
+    rate: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 1.0
+    ended: bool = False
 
 
 class Command(Message):
@@ -248,6 +263,7 @@ AnyMessage = Annotated[
     | MissionState
     | VehicleStatus
     | LinkState
+    | MissionEpoch
     | Command,
     Field(discriminator="kind"),
 ]
@@ -259,5 +275,6 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     MissionState,
     VehicleStatus,
     LinkState,
+    MissionEpoch,
     Command,
 )

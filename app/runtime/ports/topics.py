@@ -133,6 +133,7 @@ def command(vehicle: int | str | None = None) -> Topic:
 
 GLOBAL_ESTIMATE = Topic(f"{ROOT}/estimate/global")
 MISSION = Topic(f"{ROOT}/mission")
+MISSION_EPOCH = Topic(f"{ROOT}/epoch")  # ``MissionEpoch``, retained by the ground station
 
 ALL = TopicFilter(f"{ROOT}/#")
 ALL_OBSERVATIONS = TopicFilter(f"{ROOT}/obs/+")

@@ -1,7 +1,8 @@
 """The vehicle-link port: the values and the Protocol the mission uses to fly one vehicle.
 
 Courses are radians clockwise from north (MAVLink); positions are metres east/north/up of a
-mission origin; times are the vehicle's own telemetry time in seconds, never the wall clock.
+mission origin; times are mission time in seconds: each vehicle's telemetry time (its boot clock)
+mapped by the link onto the mission clock, so that vehicles booted at different times agree.
 """
 
 from __future__ import annotations
@@ -94,7 +95,8 @@ class VehicleTelemetry:
     are about the mission origin; the ground velocity is in m/s. ``in_air`` is the autopilot's
     landed state, or a height above home over ``LinkConfig.airborne_altitude_m`` before that
     state arrives. ``link_ok`` is False on the copy of the last frame that is published when the
-    link is declared lost.
+    link is declared lost. ``airspeed_m_s`` is the autopilot's newest airspeed (VFR_HUD), None
+    when the link has none.
     """
 
     vehicle_id: int
@@ -115,6 +117,7 @@ class VehicleTelemetry:
     armed: bool
     in_air: bool
     link_ok: bool = True
+    airspeed_m_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,7 +189,24 @@ class VehicleClockReset:
     previous_t_s: float
 
 
-LinkEvent = LinkLost | LinkRestored | LeftOffboard | SetpointLimited | VehicleClockReset
+@dataclass(frozen=True, slots=True)
+class ClockRebased:
+    """The vehicle's boot clock started again (``reason``: ``reboot``, its boot time went back;
+    ``jump``, it leapt ahead of the host's clock): the link re-based its offset onto the mission
+    clock (s), so mission time goes on at ``t_s`` and the vehicle stays in the formation."""
+
+    vehicle_id: int
+    t_s: float
+    reason: str
+    boot_s: float
+    previous_boot_s: float | None
+    offset_s: float
+    previous_offset_s: float | None
+
+
+LinkEvent = (
+    LinkLost | LinkRestored | LeftOffboard | SetpointLimited | VehicleClockReset | ClockRebased
+)
 
 
 class OffboardLostError(LinkError):

@@ -26,6 +26,9 @@ from app.runtime.ports.vehicle import GeodeticOrigin
 class MavsdkHub:
     """One Mavsdk instance with one or many connections, handing out a link per system id.
 
+    ``mission_clock``: mission time on the host, onto which every link maps its vehicle's boot
+    clock (None: frames carry the vehicles' own boot times).
+
     ::
 
         async with MavsdkHub(["udpin://0.0.0.0:14540", "udpin://0.0.0.0:14541"], origin) as hub:
@@ -40,6 +43,7 @@ class MavsdkHub:
         *,
         clock: Callable[[], float] = time.monotonic,
         route_logs: bool = True,
+        mission_clock: Callable[[], float] | None = None,
     ) -> None:
         self._urls = [validate_url(url) for url in urls]
         if not self._urls:
@@ -47,6 +51,7 @@ class MavsdkHub:
         self._origin = origin
         self._clock = clock
         self._route_logs = route_logs
+        self._mission_clock = mission_clock
         self._mavsdk: Mavsdk | None = None
         self._gcs_system_id = MAVSDK_GCS_SYSTEM_ID
         self._open_ids: set[int] = set()
@@ -119,7 +124,13 @@ class MavsdkHub:
         self._open_ids.add(system_id)
         try:
             async with MavsdkVehicleLink(
-                system, system_id, self._origin, config, self._clock, self._gcs_system_id
+                system,
+                system_id,
+                self._origin,
+                config,
+                self._clock,
+                self._gcs_system_id,
+                self._mission_clock,
             ) as link:
                 yield link
         finally:

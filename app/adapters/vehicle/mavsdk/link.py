@@ -1,8 +1,11 @@
 """One vehicle over MAVSDK 4.x: the link's state machine (telemetry, offboard, link loss).
 
 Kinematic telemetry is read from GLOBAL_POSITION_INT through MavlinkDirect, so that every frame
-carries the vehicle's own ``time_boot_ms`` with a consistent position and velocity; flight mode and
-armed state come from the autopilot's HEARTBEAT (decoded by the autopilot adapter); health and
+carries the vehicle's own ``time_boot_ms`` with a consistent position and velocity; given a
+mission clock, the link maps that boot time onto it (``clockmap.BootClockMap``: one offset per
+vehicle, from the host's receive times) and stamps every frame and observation with mission time,
+so that vehicles booted at different times agree. Flight mode and armed state come from the
+autopilot's HEARTBEAT (decoded by the autopilot adapter); airspeed from VFR_HUD; health and
 in-air from the Telemetry plugin; target observations from CAMERA_TRACKING_GEO_STATUS. The
 messages are decoded by ``app.adapters.vehicle.mavsdk.telemetry``. Every MAVSDK exception is
 translated into ``LinkError`` here, with ``from exc``.
@@ -43,8 +46,10 @@ from app.adapters.vehicle.autopilots.px4 import Px4FixedWingAdapter
 from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.adapters.vehicle.mavsdk import telemetry
 from app.adapters.vehicle.mavsdk.broadcast import Broadcast, Subscription
+from app.adapters.vehicle.mavsdk.clockmap import BootClockMap, Rebase
 from app.errors import LinkError
 from app.runtime.ports.vehicle import (
+    ClockRebased,
     CourseSpeedCommand,
     GeodeticOrigin,
     LeftOffboard,
@@ -83,6 +88,11 @@ class LinkConfig:
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
     the adapter.
+    ``clock_window_s``: how much mission time of receive times the boot-clock offset is the least
+    of (``BootClockMap``); ``clock_reset_s``: a boot time going back by more than this, or leaping
+    ahead of the host's clock by more, is a new boot clock.
+    ``restore_timeout_s``: how long the exit path waits for the adapter to put back the
+    parameters it changed.
     """
 
     limits: SetpointLimits
@@ -100,6 +110,8 @@ class LinkConfig:
     hold_on_exit: bool = True
     queue_size: int = 256
     heartbeat_timeout_s: float = 3.0
+    clock_window_s: float = 10.0
+    restore_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -108,6 +120,8 @@ class LinkConfig:
             "hold_timeout_s",
             "clock_reset_s",
             "heartbeat_timeout_s",
+            "clock_window_s",
+            "restore_timeout_s",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -129,6 +143,7 @@ class LinkCounters:
     setpoints_limited: int = 0
     link_losses: int = 0
     left_offboard: int = 0
+    clock_rebases: int = 0
     limited_by: dict[str, int] = field(default_factory=dict)
 
 
@@ -136,6 +151,9 @@ class MavsdkVehicleLink:
     """One vehicle over MAVSDK; an async context manager that runs its readers in a TaskGroup.
 
     Built by ``MavsdkHub.link``; see ``app.runtime.ports.vehicle.VehicleLink`` for the contract.
+    ``clock`` is the host's monotonic clock (link silence, frame age); ``mission_clock`` reads
+    mission time on the host (``app.runtime.ports.clock.MissionClock``): given, every frame is
+    stamped with its boot time mapped onto it; None, with the vehicle's own boot time.
     """
 
     def __init__(
@@ -146,8 +164,12 @@ class MavsdkVehicleLink:
         config: LinkConfig,
         clock: Callable[[], float] = time.monotonic,
         gcs_system_id: int = MAVSDK_GCS_SYSTEM_ID,
+        mission_clock: Callable[[], float] | None = None,
     ) -> None:
         self._system = system
+        self._mission_clock = mission_clock
+        self._boot_clock = BootClockMap(config.clock_window_s, config.clock_reset_s)
+        self._airspeed_m_s: float | None = None
         self._gcs_system_id = gcs_system_id
         self._id = system_id
         self._origin = origin
@@ -245,6 +267,7 @@ class MavsdkVehicleLink:
             readers = {
                 "heartbeat": self._read_heartbeat(),
                 "position": self._read_global_position(),
+                "airspeed": self._read_airspeed(),
                 "health": self._read_health(),
                 "in-air": self._read_in_air(),
                 "observations": self._read_observations(),
@@ -267,8 +290,11 @@ class MavsdkVehicleLink:
             if self._config.hold_on_exit and self._offboard in ("starting", "active"):
                 await self._hold_on_exit(failing=exc is not None)
         finally:
-            for task in self._tasks:
-                task.cancel()
+            try:
+                await self._restore_params()  # after the hold, while the readers still run
+            finally:
+                for task in self._tasks:
+                    task.cancel()
             try:
                 suppressed = await self._stack.__aexit__(exc_type, exc, tb)
             finally:
@@ -288,6 +314,31 @@ class MavsdkVehicleLink:
             log.error("vehicle %d: hold on exit failed: %s", self._id, exc)
             if not failing:
                 raise LinkError(f"vehicle {self._id}: hold on exit failed: {exc}") from exc
+
+    async def _restore_params(self) -> None:
+        """Put back the parameters the adapter changed (after the hold, bounded in time); a
+        failure is logged, never raised: the link is closing anyway."""
+        adapter = self._adapter
+        if adapter is None:
+            return
+        if not self._link_ok:
+            log.error(
+                "vehicle %d: link lost, the parameters the mission changed are not restored",
+                self._id,
+            )
+            return
+        restore = getattr(adapter, "restore_params", None)  # until every adapter has it
+        if restore is None:
+            return
+        try:
+            async with asyncio.timeout(self._config.restore_timeout_s):
+                await restore()
+        except (LinkError, MavsdkError, TimeoutError) as exc:
+            log.error(
+                "vehicle %d: restoring its parameters failed: %s",
+                self._id,
+                exc or f"no answer within {self._config.restore_timeout_s} s",
+            )
 
     def _build_adapter(self, name: AutopilotName) -> AutopilotAdapter:
         limits = self._config.limits
@@ -409,9 +460,19 @@ class MavsdkVehicleLink:
 
     def _frame(self, f: dict[str, Any]) -> VehicleTelemetry | None:
         """A GLOBAL_POSITION_INT as the next frame; None for a late or repeated one (counted).
-        Time going back by ``clock_reset_s`` or more is a reboot: an event, and a new start."""
+
+        With a mission clock its time is the boot time mapped onto it (a reboot re-bases the
+        offset: an event, and mission time goes on). Without, time going back by
+        ``clock_reset_s`` or more is a reboot: an event, and a new start."""
         t_s = telemetry.time_boot_s(f)
+        if self._mission_clock is not None:
+            t_s, rebase = self._boot_clock.update(t_s, self._mission_clock())
+            if rebase is not None and rebase.reason != "first":
+                self._rebased(rebase, t_s)
         previous = self._latest
+        if previous is not None and t_s <= previous.t_s and self._mission_clock is not None:
+            self.counters.stale_frames += 1
+            return None
         if previous is not None and t_s <= previous.t_s:
             if previous.t_s - t_s < self._config.clock_reset_s:
                 self.counters.stale_frames += 1
@@ -427,7 +488,43 @@ class MavsdkVehicleLink:
             armed=self._armed,
             landed_state_in_air=self._in_air,
             airborne_altitude_m=self._config.airborne_altitude_m,
+            t_s=t_s,
+            airspeed_m_s=self._airspeed_m_s,
         )
+
+    def _rebased(self, rebase: Rebase, t_s: float) -> None:
+        self.counters.clock_rebases += 1
+        log.warning(
+            "vehicle %d: boot clock %s (%.2f -> %.2f s): offset %.3f -> %.3f s, mission time "
+            "goes on",
+            self._id,
+            "reset" if rebase.reason == "reboot" else "jumped",
+            rebase.previous_boot_s if rebase.previous_boot_s is not None else math.nan,
+            rebase.boot_s,
+            rebase.previous_offset_s if rebase.previous_offset_s is not None else math.nan,
+            rebase.offset_s,
+        )
+        self._events.publish(
+            ClockRebased(
+                self._id,
+                t_s,
+                rebase.reason,
+                rebase.boot_s,
+                rebase.previous_boot_s,
+                rebase.offset_s,
+                rebase.previous_offset_s,
+            )
+        )
+
+    async def _read_airspeed(self) -> None:
+        async with aclosing(self._direct.subscribe_message("VFR_HUD")) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    self._airspeed_m_s = telemetry.vfr_hud_airspeed(telemetry.fields(message))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("VFR_HUD", exc)
 
     async def _read_local_position(self) -> None:
         async with aclosing(self._direct.subscribe_message("LOCAL_POSITION_NED")) as messages:
@@ -633,8 +730,17 @@ class MavsdkVehicleLink:
             self._record(setpoint, state.t_s)
 
     async def hold(self) -> None:
+        """Stop offboard and hold; a vehicle that left offboard on its own (someone else changed
+        its mode) is left in that mode: the pilot always wins."""
         adapter = self._require_adapter()
         async with self._send_lock:
+            if self._offboard == "left":
+                log.warning(
+                    "vehicle %d: left in %s (not ours to hold: someone else chose it)",
+                    self._id,
+                    self._mode,
+                )
+                return
             # the vehicle leaving offboard from now on is this hold, not a change on its own
             before, self._offboard = self._offboard, "idle"
             try:

@@ -51,14 +51,18 @@ def global_position(
     armed: bool,
     landed_state_in_air: bool,
     airborne_altitude_m: float,
+    t_s: float | None = None,
+    airspeed_m_s: float | None = None,
 ) -> VehicleTelemetry:
     """GLOBAL_POSITION_INT as a frame in the mission frame (``link_ok`` True).
 
     The course is the ground velocity's direction, or the heading when the vehicle is nearly at
     rest; the vehicle is in the air when its landed state says so or when it is more than
-    ``airborne_altitude_m`` above home.
+    ``airborne_altitude_m`` above home. ``t_s``: the frame's time (mission time; None: the
+    message's boot time); ``airspeed_m_s``: the newest VFR_HUD airspeed, when the link has one.
     """
-    t_s = time_boot_s(f)
+    if t_s is None:
+        t_s = time_boot_s(f)
     lat = int(f["lat"]) / 1e7
     lon = int(f["lon"]) / 1e7
     alt = int(f["alt"]) / 1000.0
@@ -92,7 +96,14 @@ def global_position(
         armed=armed,
         in_air=landed_state_in_air or relative_altitude > airborne_altitude_m,
         link_ok=True,
+        airspeed_m_s=airspeed_m_s,
     )
+
+
+def vfr_hud_airspeed(f: dict[str, Any]) -> float | None:
+    """VFR_HUD: the airspeed (m/s); None when it is not a finite, non-negative number."""
+    airspeed = float(f["airspeed"])
+    return airspeed if math.isfinite(airspeed) and airspeed >= 0.0 else None
 
 
 def local_position_ned(f: dict[str, Any]) -> tuple[float, float, float]:

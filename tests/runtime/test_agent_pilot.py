@@ -1,0 +1,236 @@
+"""The agent and the vehicle's bring-up around a fake link: the pilot always wins (a mode change
+by someone else is left alone until ``resume``), the hand-over waits for height and airspeed, the
+course rate reaches the link, and every vehicle flies its own altitude of the stack."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from app.adapters.bus import InProcessBroker, InProcessBus
+from app.compose.parts import bring_up, vehicle_agent
+from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
+from app.runtime.agent import VehicleAgent
+from app.runtime.ports import messages as bus
+from app.runtime.ports import topics
+from app.runtime.vehicle import BringUp, HandoverTimeout, prepare_vehicle
+from tests.support.fake_link import QueueLink, frame
+
+WAIT_S = 5.0
+
+
+class Events:
+    def __init__(self) -> None:
+        self.seen: list[tuple[str, float, dict[str, Any]]] = []
+
+    def emit(self, kind: str, t_s: float, **fields: object) -> None:
+        self.seen.append((kind, t_s, fields))
+
+    def of(self, kind: str) -> list[dict[str, Any]]:
+        return [f for k, _t, f in self.seen if k == kind]
+
+
+async def until(predicate: Callable[[], bool]) -> None:
+    async with asyncio.timeout(WAIT_S):
+        while not predicate():  # noqa: ASYNC110
+            await asyncio.sleep(0.001)
+
+
+class Flyer:
+    """Feeds the fake link frames 0.1 s of vehicle time apart, flying the hil mission's
+    standby circle (150 m about (-1000, 0)) counter-clockwise at 14 m/s."""
+
+    def __init__(self, link: QueueLink) -> None:
+        self.link = link
+        self.t = 0.0
+
+    async def frames(self, n: int) -> None:
+        for _ in range(n):
+            self.t += 0.1
+            a = 14.0 / 150.0 * self.t
+            east, north = -1000.0 + 150.0 * math.cos(a), 150.0 * math.sin(a)
+            course = -a % (2.0 * math.pi)
+            self.link.put(frame(self.t, east, north, course_rad=course, flight_mode=self.link.mode))
+            await asyncio.sleep(0.002)
+
+
+async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> None:
+    plan = build_plan(load_config("hil", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    events = Events()
+    statuses: list[bus.VehicleStatus] = []
+    async with (
+        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="ground") as ground,
+        ground.subscribe(topics.ALL_STATUS) as heard,
+        asyncio.TaskGroup() as tg,
+    ):
+
+        async def listen() -> None:
+            async for _topic, message in heard:
+                if isinstance(message, bus.VehicleStatus):
+                    statuses.append(message)
+
+        def control() -> str:
+            return statuses[-1].control
+
+        def piloted() -> bool:
+            return agent.pilot_has_control
+
+        listener = tg.create_task(listen())
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, events)
+        running = tg.create_task(agent.run())
+        fly = Flyer(link)
+        await fly.frames(20)
+        await until(lambda: link.sent >= 10)
+        assert statuses
+        assert control() == "mission"
+
+        link.leave_offboard("POSCTL", fly.t)  # an RC pilot takes it
+        await until(lambda: bool(events.of("pilot_took_over")))
+        sent = link.sent
+        await fly.frames(40)  # 4 s of frames: past the old 2 s retry
+        await until(lambda: statuses[-1].t_s >= fly.t - 0.2)
+        assert link.sent == sent
+        assert link.offboard_starts == 0
+        assert link.holds == 0
+        assert events.of("pilot_took_over") == [{"vehicle": 0, "flight_mode": "POSCTL"}]
+        assert piloted()
+        assert control() == "pilot"
+        assert statuses[-1].flight_mode == "POSCTL"
+
+        # a hold for every vehicle leaves this one in its pilot's mode
+        await ground.publish(
+            topics.command(), bus.Command(sender="ground", t_s=0.0, command="hold")
+        )
+        await until(lambda: bool(events.of("command")))
+        assert link.holds == 0
+        await ground.publish(
+            topics.command(), bus.Command(sender="ground", t_s=0.0, command="resume")
+        )
+        await until(lambda: link.offboard_starts == 1)
+        assert events.of("resumed") == [{"vehicle": 0, "from_mode": "POSCTL"}]
+        assert not piloted()
+        await fly.frames(20)
+        await until(lambda: link.sent > sent)
+        await until(lambda: control() == "mission")
+        running.cancel()
+        listener.cancel()
+
+
+async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude() -> None:
+    plan = build_plan(load_config("hil", MissionConfig))
+    stack_m = plan.config.link.altitude_stack_m
+    assert stack_m > 0.0
+    broker = InProcessBroker()
+    altitudes = []
+    for i in range(plan.count):
+        link = QueueLink()
+        async with (
+            InProcessBus(broker, client_id=f"agent-{i}") as agent_bus,
+            asyncio.TaskGroup() as tg,
+        ):
+            agent = vehicle_agent(plan, i, link, agent_bus, Events(), builtin=True)
+            running = tg.create_task(agent.run())
+            await Flyer(link).frames(30)
+            await until(lambda link=link: link.sent >= 20)  # type: ignore[misc]
+            running.cancel()
+        assert {c.altitude_m for c in link.commands} == {bring_up(plan, i).altitude_m}
+        altitudes.append(link.commands[-1].altitude_m)
+        # loitering at standby, the wanted course turns: its rate reaches the link
+        rates = [c.course_rate_rad_s for c in link.commands]
+        assert all(math.isfinite(r) for r in rates)
+        assert any(abs(r) > 0.01 for r in rates)
+        # counter-clockwise seen from above: the course falls (clockwise positive)
+        assert sum(r < 0.0 for r in rates) > 0.8 * len(rates)
+    base = plan.config.link.altitude_m
+    assert altitudes == [base + i * stack_m for i in range(plan.count)]
+
+
+class ClimbingLink(QueueLink):
+    """A vehicle that takes off from a runway: ``take_off`` returns once it is rolling, and
+    frames then come from ``profile`` (height m, airspeed m/s), 0.5 s apart."""
+
+    def __init__(self, profile: list[tuple[float, float]]) -> None:
+        super().__init__()
+        self.profile = profile
+
+    async def wait_ready(self, timeout_s: float) -> Any:
+        ground = frame(0.0, 0.0, 0.0, relative_altitude_m=0.0, ground_speed_m_s=0.0, in_air=False)
+        self.put(ground)
+        return ground
+
+    async def take_off(self, timeout_s: float) -> None:
+        asyncio.get_running_loop().call_soon(lambda: asyncio.ensure_future(self._climb()))
+
+    async def _climb(self) -> None:
+        for k, (height, airspeed) in enumerate(self.profile):
+            await asyncio.sleep(0.005)
+            self.put(
+                frame(
+                    0.5 * (k + 1),
+                    0.0,
+                    0.0,
+                    relative_altitude_m=height,
+                    airspeed_m_s=airspeed,
+                    ground_speed_m_s=airspeed,
+                    in_air=height > 0.0 or airspeed > 9.0,
+                    flight_mode="TAKEOFF",
+                )
+            )
+
+
+def bring(**changes: float) -> BringUp:
+    fields: dict[str, Any] = {
+        "connect_timeout_s": 1.0,
+        "take_off_timeout_s": 1.0,
+        "altitude_m": 100.0,
+        "cruise_speed_m_s": 18.0,
+        "origin_lat_deg": 0.0,
+        "origin_lon_deg": 0.0,
+        "handover_min_height_m": 30.0,
+        "handover_min_airspeed_m_s": 12.0,
+        "handover_timeout_s": 2.0,
+    }
+    fields.update(changes)
+    return BringUp(**fields)
+
+
+async def test_the_hand_over_waits_for_height_and_airspeed_never_the_runway() -> None:
+    # a ground roll at 10 m/s reported as in the air (as PX4 does), a climb, a slow stretch
+    profile = [(0.0, 10.0), (0.0, 12.5), (8.0, 13.0), (31.0, 11.0), (36.0, 14.5), (45.0, 15.0)]
+    link = ClimbingLink(profile)
+    events = Events()
+    await prepare_vehicle(link, bring(), events)
+    assert link.offboard_starts == 1
+    [handover] = events.of("handover")
+    assert handover["height_m"] == 36.0
+    assert handover["airspeed_m_s"] == 14.5
+    assert handover["speed_source"] == "airspeed"
+    assert [k for k, _t, _f in events.seen] == ["handover", "offboard"]
+
+
+@pytest.mark.parametrize(
+    ("changes", "named"),
+    [
+        ({"handover_min_height_m": 80.0}, "height 45.0 m < 80.0 m"),
+        ({"handover_min_airspeed_m_s": 20.0}, "airspeed 15.0 m/s < 20.0 m/s"),
+    ],
+)
+async def test_a_hand_over_that_never_comes_names_what_was_not_reached(
+    changes: dict[str, float], named: str
+) -> None:
+    link = ClimbingLink([(10.0, 13.0), (45.0, 15.0)])
+    events = Events()
+    with pytest.raises(HandoverTimeout, match=named):
+        await prepare_vehicle(link, bring(handover_timeout_s=0.2, **changes), events)
+    assert link.offboard_starts == 0
+    [timeout] = events.of("handover_timeout")
+    assert named in timeout["reason"]
