@@ -171,6 +171,11 @@ class MissionConfig(StrictModel):
     bus: str | None = None
 
     @model_validator(mode="after")
+    def _phase_band_fits(self) -> "MissionConfig":
+        self.phase.check_band(self.radius_m)
+        return self
+
+    @model_validator(mode="after")
     def _standby_flyable(self) -> "MissionConfig":
         turn_m = self.limits.cruise_speed_m_s / self.limits.max_course_rate_rad_s
         if self.standby.radius_m < 1.05 * turn_m:

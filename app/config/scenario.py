@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from app.config.loading import load_config
 from app.config.schema import (
@@ -42,6 +42,11 @@ class ScenarioConfig(StrictModel):
     phase: PhaseConfig = PhaseConfig()
     target: TargetConfig = StationaryTargetConfig(kind="stationary")
     vehicles: list[VehicleStartConfig] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _phase_band_fits(self) -> "ScenarioConfig":
+        self.phase.check_band(self.radius_m)
+        return self
 
 
 def build_setup(scenario: ScenarioConfig) -> SimulationSetup:

@@ -207,3 +207,12 @@ class PhaseConfig(StrictModel):
             actuator=resolve_actuator(self.actuator, honours_speed),
             radius_band_m=self.radius_band_m,
         )
+
+    def check_band(self, radius_m: float) -> None:
+        """Raise ValueError when the radius actuator could be flown (``auto`` or ``radius``)
+        with a band that does not fit inside the standoff radius."""
+        if self.actuator != "speed" and self.radius_band_m >= radius_m:
+            raise ValueError(
+                f"phase.radius_band_m ({self.radius_band_m} m) must be smaller than radius_m "
+                f"({radius_m} m) when phase.actuator is {self.actuator!r}"
+            )
