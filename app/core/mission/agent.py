@@ -17,6 +17,13 @@ around its standby point with the same guidance field (a stationary "target" at 
 point, no phase keeping). A vehicle that the ground station has left out of the formation keeps
 orbiting the target without phase keeping, so it never steers on a stale spacing.
 
+With ``MissionAgentParams.course_id`` the agent also identifies its vehicle's course loop in
+flight (``guidance.course_id``: gain k and delay of eq. 2 from every control tick's course and
+command) and, once the estimate is ready, flies the course command with the identified k (the
+lead field_rate / k and the clamp W / k) and steers on the state predicted for the identified
+delay when it is longer than ``latency_s``; an event ``course_loop_identified`` says what was
+learned, when it first is and whenever it changes materially.
+
 ``step`` is the one entry for every driver (the fast simulation, the async agent loop, live or
 in-process): it takes one ``AgentInput`` and returns the new state and an ``AgentOutbox`` of
 what is to be sent or recorded; when the local estimate and the status are due is part of the
@@ -41,6 +48,7 @@ from app.core.estimation.federated import MainParams, apply_feedback
 from app.core.estimation.local import LocalParams, LocalState, StepReport, local_step
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.core.estimation.models import MotionModel
+from app.core.guidance import course_id as cid
 from app.core.mission.schedule import Every
 from app.core.mission.stage import Stage
 from app.core.mission.team import dead_reckon
@@ -87,6 +95,14 @@ class MissionAgentParams:
     it last sent), not on where they were (both 0: the paper's loop; a delay of one 0.1 s tick
     costs ~50 % more distance error around a moving target, ``benchmarks.bench_track
     --latency-ticks``).
+
+    Course-loop identification (improvement): with ``course_id`` the agent fits its vehicle's
+    course loop on every tick it commands (``guidance.course_id``). Once the estimate is ready
+    and ``fly_identified``, ``agent``, ``standby`` and ``track`` fly with the identified k as
+    their envelope's ``course_gain_per_s`` and the latency compensation uses the identified
+    delay where it exceeds ``latency_s``; the flown loop is rebuilt (and reported) only when k
+    moves by more than ``course_id_change`` (a fraction) or the delay changes. Without
+    ``fly_identified`` the loop is identified and reported only. None: off.
     """
 
     vehicle: int
@@ -103,8 +119,13 @@ class MissionAgentParams:
     latency_s: float = 0.0
     hold_s: float = 0.0
     moving_speed_m_s: float = 1.5
+    course_id: cid.CourseIdParams | None = None
+    fly_identified: bool = True
+    course_id_change: float = 0.05
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.course_id_change) and 0.0 < self.course_id_change < 1.0):
+            raise ValueError(f"course_id_change must be in (0, 1), got {self.course_id_change!r}")
         if not self.moving_speed_m_s >= 0.0:  # inf: only the track stage flies ``track``
             raise ValueError(f"moving_speed_m_s must be >= 0, got {self.moving_speed_m_s!r}")
         for name in ("latency_s", "hold_s"):
@@ -120,6 +141,20 @@ class MissionAgentParams:
     def sensor(self) -> str:
         """The vehicle's name as a sensor of the federated estimator."""
         return str(self.vehicle)
+
+
+@dataclass(frozen=True, slots=True)
+class TunedLoop:
+    """The course loop last reported (identified gain k 1/s, delay s) and what is flown on it:
+    ``flown_gain_per_s`` (the assumed k while the identified one is within
+    ``course_id_change`` of it), and ``flown``, the parameters rebuilt from ``base`` (kept to
+    notice other parameters; ``base`` itself when nothing needed a change)."""
+
+    gain_per_s: float
+    delay_s: float
+    flown_gain_per_s: float
+    base: MissionAgentParams
+    flown: MissionAgentParams
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,6 +174,9 @@ class MissionAgentState:
     last_command: tuple[float, float] | None = None
     estimates: Every = field(default_factory=lambda: Every(0.2))
     statuses: Every = field(default_factory=lambda: Every(0.1))
+    #: the course-loop identifier (``MissionAgentParams.course_id``) and what it has tuned
+    course_id: cid.CourseIdState = field(default_factory=cid.initial_state)
+    tuned: TunedLoop | None = None
 
 
 def initial_agent_state(
@@ -229,15 +267,98 @@ def control(
     then, the middle of the hold; against the course at the start of the hold it may ask up to
     W (1 + k hold_s / 2), which keeps the vehicle turning at W through a hold in which a
     command at exactly W / k of lead would let the rate decay (the turn rate itself is the
-    autopilot's to limit, and it does)."""
-    if params.latency_s > 0.0 or params.hold_s > 0.0:
-        lead_s = params.latency_s + 0.5 * params.hold_s
+    autopilot's to limit, and it does). With ``course_id`` k and the latency are the
+    identified ones once ready; the tick (course, command sent) feeds the identifier."""
+    flown = _flown_params(state, params)
+    if flown.latency_s > 0.0 or flown.hold_s > 0.0:
+        lead_s = flown.latency_s + 0.5 * flown.hold_s
         course, speed = state.last_command or (own.course_rad, own.speed_m_s)
-        ahead = predict_own(own, course, speed, params.agent.envelope, lead_s)
-        state, command, events = _control(state, t_s + lead_s, ahead, params)
+        ahead = predict_own(own, course, speed, flown.agent.envelope, lead_s)
+        state, command, events = _control(state, t_s + lead_s, ahead, flown)
     else:
-        state, command, events = _control(state, t_s, own, params)
-    return replace(state, last_command=(command.course_rad, command.speed_m_s)), command, events
+        state, command, events = _control(state, t_s, own, flown)
+    state = replace(state, last_command=(command.course_rad, command.speed_m_s))
+    if params.course_id is not None:
+        state, learned = _identify(state, t_s, own, command, params, params.course_id)
+        events = (*events, *learned)
+    return state, command, events
+
+
+def _flown_params(state: MissionAgentState, params: MissionAgentParams) -> MissionAgentParams:
+    """``params``, or the ones rebuilt with the identified course loop."""
+    tuned = state.tuned
+    if tuned is None or not params.fly_identified:
+        return params
+    if tuned.base is params:
+        return tuned.flown
+    return _retuned(params, tuned.flown_gain_per_s, tuned.delay_s)
+
+
+def _retuned(params: MissionAgentParams, gain_per_s: float, delay_s: float) -> MissionAgentParams:
+    """The agent's parameters flown with course gain ``gain_per_s`` (every envelope) and a
+    latency of at least ``delay_s``; ``params`` itself when that changes nothing."""
+    latency_s = max(params.latency_s, delay_s)
+    if gain_per_s == params.agent.envelope.course_gain_per_s and latency_s == params.latency_s:
+        return params
+
+    def tuned(agent: AgentParams) -> AgentParams:
+        return replace(agent, envelope=replace(agent.envelope, course_gain_per_s=gain_per_s))
+
+    return replace(
+        params,
+        agent=tuned(params.agent),
+        standby=tuned(params.standby),
+        track=None if params.track is None else tuned(params.track),
+        latency_s=latency_s,
+    )
+
+
+def _identify(
+    state: MissionAgentState,
+    t_s: float,
+    own: OwnTelemetry,
+    command: Command,
+    params: MissionAgentParams,
+    id_params: cid.CourseIdParams,
+) -> tuple[MissionAgentState, tuple[AgentEvent, ...]]:
+    """Feed the tick to the identifier; when a ready estimate is new, or its k has moved by more
+    than ``course_id_change`` or its delay changed since last reported, report it and fly it
+    (k only where it differs from the assumed one by as much)."""
+    sent = None if state.holding else command.course_rad
+    ident = cid.update(state.course_id, cid.CourseSample(t_s, own.course_rad, sent), id_params)
+    state = replace(state, course_id=ident)
+    est = cid.estimate(ident, id_params)
+    if not est.ready:
+        return state, ()
+    change = params.course_id_change
+    last = state.tuned
+    if last is not None and last.base is params:
+        moved = abs(est.gain_per_s - last.gain_per_s) > change * last.gain_per_s
+        if not moved and est.delay_s == last.delay_s:
+            return state, ()
+    assumed = params.agent.envelope.course_gain_per_s
+    gain = est.gain_per_s if abs(est.gain_per_s - assumed) > change * assumed else assumed
+    flown = _retuned(params, gain, est.delay_s) if params.fly_identified else params
+    state = replace(state, tuned=TunedLoop(est.gain_per_s, est.delay_s, gain, params, flown))
+    if not params.fly_identified:
+        use = "not flown"
+    elif flown is params:
+        use = "flown as assumed"
+    else:
+        use = f"flown with k = {gain:.3f} /s, latency {flown.latency_s:.2f} s"
+    detail = (
+        f"k = {est.gain_per_s:.3f} /s, delay = {est.delay_s:.2f} s "
+        f"(assumed k = {assumed:.3f} /s, latency {params.latency_s:.2f} s; "
+        f"{est.informative_count} informative samples, {est.informative_s:.0f} s, "
+        f"rel. se {est.rel_se:.1%}): {use}"
+    )
+    return state, (AgentEvent(t_s, "course_loop_identified", detail),)
+
+
+def identified_course_loop(state: MissionAgentState) -> tuple[float, float] | None:
+    """The identified (gain 1/s, delay s) in use, None before the estimate is ready."""
+    tuned = state.tuned
+    return None if tuned is None else (tuned.gain_per_s, tuned.delay_s)
 
 
 def _control(
