@@ -109,35 +109,69 @@ def step(
         raise ValueError(f"non-finite command: course {course_cmd_rad!r}, speed {speed_cmd_m_s!r}")
     if not (dt_s > 0.0 and math.isfinite(dt_s)):
         raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
+    return FixedWingState(
+        *advance(
+            state.east_m,
+            state.north_m,
+            state.course_rad,
+            state.speed_m_s,
+            course_cmd_rad,
+            speed_cmd_m_s,
+            envelope,
+            dt_s,
+            wind_east_m_s,
+            wind_north_m_s,
+            hold_envelope,
+            exact_arc,
+        )
+    )
+
+
+def advance(
+    east_m: float,
+    north_m: float,
+    course_rad: float,
+    speed_m_s: float,
+    course_cmd_rad: float,
+    speed_cmd_m_s: float,
+    envelope: VehicleEnvelope,
+    dt_s: float,
+    wind_east_m_s: float = 0.0,
+    wind_north_m_s: float = 0.0,
+    hold_envelope: bool = True,
+    exact_arc: bool = True,
+) -> tuple[float, float, float, float, float, float]:
+    """``step`` on plain floats, unchecked, for inner loops that validated their inputs once
+    (the guidance's prediction of the closed loop runs it hundreds of times per check): returns
+    (east m, north m, course rad, speed m/s, course rate rad/s, acceleration m/s^2)."""
     max_rate = envelope.max_course_rate_rad_s
-    rate = envelope.course_gain_per_s * wrap_pi(course_cmd_rad - state.course_rad)
+    rate = envelope.course_gain_per_s * wrap_pi(course_cmd_rad - course_rad)
     rate = min(max(rate, -max_rate), max_rate)
     target_speed = envelope.clamp_speed(speed_cmd_m_s)
     max_accel = envelope.max_accel_m_s2
-    accel = envelope.speed_gain_per_s * (target_speed - state.speed_m_s)
+    accel = envelope.speed_gain_per_s * (target_speed - speed_m_s)
     accel = min(max(accel, -max_accel), max_accel)
-    speed = state.speed_m_s + accel * dt_s
+    speed = speed_m_s + accel * dt_s
     speed = min(speed, target_speed) if accel > 0.0 else max(speed, target_speed)
     if hold_envelope:
         speed = envelope.clamp_speed(speed)
-    accel = (speed - state.speed_m_s) / dt_s
-    mean_speed = 0.5 * (state.speed_m_s + speed)
-    course0 = state.course_rad
-    course1 = course0 + rate * dt_s
+    accel = (speed - speed_m_s) / dt_s
+    mean_speed = 0.5 * (speed_m_s + speed)
+    course1 = course_rad + rate * dt_s
     turn = rate * dt_s
     if exact_arc and abs(turn) > 1e-9:
         # exact arc: integral of (sin, cos)(course0 + rate t) over the step
-        d_east = mean_speed * (math.cos(course0) - math.cos(course1)) / rate
-        d_north = mean_speed * (math.sin(course1) - math.sin(course0)) / rate
+        d_east = mean_speed * (math.cos(course_rad) - math.cos(course1)) / rate
+        d_north = mean_speed * (math.sin(course1) - math.sin(course_rad)) / rate
     else:
-        mid = course0 + 0.5 * turn
+        mid = course_rad + 0.5 * turn
         d_east = mean_speed * math.sin(mid) * dt_s
         d_north = mean_speed * math.cos(mid) * dt_s
-    return FixedWingState(
-        east_m=state.east_m + d_east + wind_east_m_s * dt_s,
-        north_m=state.north_m + d_north + wind_north_m_s * dt_s,
-        course_rad=wrap_pi(course1),
-        speed_m_s=speed,
-        course_rate_rad_s=rate,
-        accel_m_s2=accel,
+    return (
+        east_m + d_east + wind_east_m_s * dt_s,
+        north_m + d_north + wind_north_m_s * dt_s,
+        wrap_pi(course1),
+        speed,
+        rate,
+        accel,
     )

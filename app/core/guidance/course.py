@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 
 from app.core.frames import wrap_pi
 from app.core.guidance.field import FieldParams, check_finite, course_and_rate, peak_curvature
-from app.core.plant import FixedWingState, VehicleEnvelope, step
+from app.core.plant import VehicleEnvelope, advance
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,8 +98,9 @@ def predict_min_distance_error(
       and overshoot);
     - the horizon ends.
 
-    The vehicle is the eq. (2) plant (``plant.step``) at the constant speed, in the target's
-    frame; ``field`` is flown as the ordinary field whatever its ``inverse``.
+    The vehicle is the eq. (2) plant (``plant.advance``: ``plant.step`` on floats) at the
+    constant speed, in the target's frame; ``field`` is flown as the ordinary field whatever its
+    ``inverse``.
     """
     check_finite(
         rel_east_m=rel_east_m, rel_north_m=rel_north_m, course_rad=course_rad, speed_m_s=speed_m_s
@@ -112,20 +113,17 @@ def predict_min_distance_error(
     envelope = VehicleEnvelope(speed_m_s, speed_m_s, speed_m_s, 1.0, w, loop.gain_per_s)
     flyable = peak_curvature(field.radius_m, field.c)[0] <= w / speed_m_s * (1.0 + 1e-9)
     far_m = 2.2 * speed_m_s / w
-    vehicle = FixedWingState(rel_east_m, rel_north_m, course_rad, speed_m_s)
-    min_err = math.hypot(rel_east_m, rel_north_m) - field.radius_m
+    x, y, chi = rel_east_m, rel_north_m, course_rad
+    s = speed_m_s
+    min_err = math.hypot(x, y) - field.radius_m
     t = 0.0
     while t < horizon_s:
-        chi = vehicle.course_rad
-        f_course, f_rate = course_and_rate(
-            vehicle.east_m, vehicle.north_m, vehicle.v_east_m_s, vehicle.v_north_m_s, ordinary
-        )
+        f_course, f_rate = course_and_rate(x, y, s * math.sin(chi), s * math.cos(chi), ordinary)
         if flyable and abs(wrap_pi(f_course - chi)) < 0.01:
             return min_err
         cmd = _lead_command(chi, f_course, f_rate, loop)
-        vehicle = step(vehicle, cmd, speed_m_s, envelope, step_s, exact_arc=False)
+        x, y, chi, _, _, _ = advance(x, y, chi, s, cmd, s, envelope, step_s, exact_arc=False)
         t += step_s
-        x, y, chi = vehicle.east_m, vehicle.north_m, vehicle.course_rad
         err = math.hypot(x, y) - field.radius_m
         if err < min_err:
             min_err = err
