@@ -145,8 +145,9 @@ def ground_station(
 def vehicle_agent(
     plan: MissionPlan, vehicle: int, link: VehicleLink, bus: Bus, events: EventSink, builtin: bool
 ) -> VehicleAgent:
-    """Vehicle ``vehicle``'s agent, at its own altitude of the stack; on the built-in
-    simulator its clock runs ``speedup`` times the host's."""
+    """Vehicle ``vehicle``'s agent, at its own altitude of the stack, its phase actuator the
+    file's choice resolved against what its autopilot honours; on the built-in simulator its
+    clock runs ``speedup`` times the host's."""
     cfg = plan.config
     return VehicleAgent(
         plan.agents[vehicle],
@@ -154,7 +155,9 @@ def vehicle_agent(
         bus,
         events,
         AgentRuntimeParams(
-            altitude_m=cfg.link.vehicle_altitude_m(vehicle), clock_rate=clock_rate(plan, builtin)
+            altitude_m=cfg.link.vehicle_altitude_m(vehicle),
+            clock_rate=clock_rate(plan, builtin),
+            phase_actuator=plan.phase_actuator,
         ),
     )
 
@@ -219,6 +222,9 @@ def write_outputs(
             },
             "agents": {str(a.params.vehicle): dataclasses.asdict(a.counters) for a in agents},
             "fusion": _fusion_counters(ground),
+            "phase_actuators": {
+                str(a.params.vehicle): a.actuator for a in agents if a.actuator is not None
+            },
             "vehicle_altitudes_m": {
                 str(i): plan.config.link.vehicle_altitude_m(i) for i in range(plan.count)
             },

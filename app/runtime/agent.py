@@ -20,9 +20,16 @@ arrives while an older one waits replaces it (``FUSED_QUEUE``).
 import asyncio
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from app.core.agent import OwnTelemetry
+from app.core.agent import (
+    ActuatorChoice,
+    AgentParams,
+    OwnTelemetry,
+    PhaseActuator,
+    resolve_actuator,
+    with_phase_actuator,
+)
 from app.core.estimation.backlog import merge_backlog
 from app.core.estimation.messages import Observation
 from app.core.mission import agent as logic
@@ -61,7 +68,9 @@ class AgentRuntimeParams:
     per this much of their time (``merge_backlog``). ``clock_rate``: vehicle seconds per host
     second (the built-in simulator's speed-up; 1 for real vehicles), for counting how long
     frames waited (``_frame_wait``). ``load_*``: when to warn that the agent skips too many
-    telemetry frames (``_watch_load``)."""
+    telemetry frames (``_watch_load``). ``phase_actuator``: the phase actuator the mission file
+    asks for, resolved at start against what the vehicle's autopilot honours
+    (``VehicleLink.honours_speed``; None: fly the agent parameters as given)."""
 
     altitude_m: float | None = None
     status_period_s: float = 0.1
@@ -71,6 +80,7 @@ class AgentRuntimeParams:
     load_window_s: float = 10.0
     load_warn_share: float = 0.2
     load_warn_every_s: float = 30.0
+    phase_actuator: ActuatorChoice | None = None
 
 
 @dataclass
@@ -96,6 +106,22 @@ class _LoadWindow:
     warned: bool = False
 
 
+def _with_actuator(
+    params: logic.MissionAgentParams, actuator: PhaseActuator
+) -> logic.MissionAgentParams:
+    """Every stage's agent parameters flying phase keeping with ``actuator``."""
+
+    def fly(p: AgentParams) -> AgentParams:
+        return with_phase_actuator(p, actuator)
+
+    return replace(
+        params,
+        agent=fly(params.agent),
+        standby=fly(params.standby),
+        track=fly(params.track) if params.track is not None else None,
+    )
+
+
 class VehicleAgent:
     """Runs one vehicle until cancelled; ``run`` is the whole agent."""
 
@@ -107,6 +133,20 @@ class VehicleAgent:
         events: EventSink,
         runtime: AgentRuntimeParams = AgentRuntimeParams(),
     ) -> None:
+        self.actuator: PhaseActuator | None = None
+        if runtime.phase_actuator is not None:
+            self.actuator = resolve_actuator(runtime.phase_actuator, link.honours_speed)
+            params = _with_actuator(params, self.actuator)
+            latest = link.latest
+            events.emit(
+                "phase_actuator",
+                latest.t_s if latest is not None else 0.0,
+                vehicle=params.vehicle,
+                actuator=self.actuator,
+                configured=runtime.phase_actuator,
+                autopilot=link.autopilot_name,
+                honours_speed=link.honours_speed,
+            )
         self.params = params
         self.name = f"agent-{params.vehicle}"
         self.state = logic.initial_agent_state(

@@ -16,7 +16,7 @@ from app.compose.parts import bring_up, vehicle_agent
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.runtime.agent import VehicleAgent
+from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.vehicle import BringUp, HandoverTimeout, prepare_vehicle
@@ -234,3 +234,26 @@ async def test_a_hand_over_that_never_comes_names_what_was_not_reached(
     assert link.offboard_starts == 0
     [timeout] = events.of("handover_timeout")
     assert named in timeout["reason"]
+
+
+@pytest.mark.parametrize(
+    ("configured", "honours_speed", "actuator"),
+    [("auto", True, "speed"), ("auto", False, "radius"), ("speed", False, "speed")],
+)
+async def test_the_phase_actuator_is_resolved_against_what_the_autopilot_honours(
+    configured: str, honours_speed: bool, actuator: str
+) -> None:
+    plan = build_plan(load_config("hil", MissionConfig))
+    link = QueueLink()
+    link.honours_speed = honours_speed
+    events = Events()
+    async with InProcessBus(InProcessBroker(), client_id="agent-0") as agent_bus:
+        runtime = AgentRuntimeParams(phase_actuator=configured)  # type: ignore[arg-type]
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, events, runtime)
+    assert agent.actuator == actuator
+    assert agent.params.agent.phase.actuator == actuator
+    assert agent.params.standby.phase.actuator == actuator
+    [event] = events.of("phase_actuator")
+    assert event["actuator"] == actuator
+    assert event["honours_speed"] is honours_speed
+    assert event["configured"] == configured

@@ -26,6 +26,7 @@ class QueueLink:
     vehicle_id = 1
     autopilot_name = "fake"
     link_ok = True
+    honours_speed = True
 
     def __init__(self) -> None:
         self.frames: asyncio.Queue[VehicleTelemetry] = asyncio.Queue()

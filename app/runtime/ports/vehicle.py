@@ -238,6 +238,12 @@ class VehicleLink(Protocol):
         ...
 
     @property
+    def honours_speed(self) -> bool:
+        """Whether the vehicle flies the commanded speed under the mission's control (else the
+        phase keeping must act through something other than speed)."""
+        ...
+
+    @property
     def latest(self) -> VehicleTelemetry | None:
         """The newest telemetry frame, or None before the first."""
         ...

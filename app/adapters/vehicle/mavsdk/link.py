@@ -214,6 +214,10 @@ class MavsdkVehicleLink:
         return self._require_adapter().name
 
     @property
+    def honours_speed(self) -> bool:
+        return self._require_adapter().honours_speed
+
+    @property
     def latest(self) -> VehicleTelemetry | None:
         return self._latest
 
@@ -327,12 +331,9 @@ class MavsdkVehicleLink:
                 self._id,
             )
             return
-        restore = getattr(adapter, "restore_params", None)  # until every adapter has it
-        if restore is None:
-            return
         try:
             async with asyncio.timeout(self._config.restore_timeout_s):
-                await restore()
+                await adapter.restore_params()
         except (LinkError, MavsdkError, TimeoutError) as exc:
             log.error(
                 "vehicle %d: restoring its parameters failed: %s",
