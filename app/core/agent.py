@@ -144,7 +144,11 @@ class PhaseParams:
     ``radius_band_m`` of r_d (and no tighter than the course-rate limit allows), changes at most
     ``radius_rate_m_s`` per second, and the field is built for r_eff rounded to
     ``radius_step_m`` about r_d (so c and the field are re-solved only when it moves a step;
-    a spaced team has v_w = v_cruise, hence r_eff = r_d exactly).
+    a spaced team has v_w = v_cruise, hence r_eff = r_d exactly). Around a moving target the
+    phase rate at a held ground speed s is uneven round the orbit, so the radius actuator steers
+    on the orbit-time phase theta + v_t . r_hat / s (first order in v_t / s): a team spaced in
+    it stays on r_d, and its polar angles swing by up to sqrt(3) v_t / s rad about 2 pi / 3 (for
+    three), which no vehicle at a fixed speed on one circle can avoid.
     """
 
     law: PhaseLaw = "paper"
@@ -418,6 +422,12 @@ def _speed_command(
     if not 0 <= params.index < len(team):
         raise ValueError(f"vehicle index {params.index} outside a team of {len(team)}")
     tx, ty, sign = inputs.target.east_m, inputs.target.north_m, g.orbit_sign
+    # at a held ground speed s, a target moving at v_t makes the phase rate uneven round the
+    # orbit; steer on the orbit-time phase theta + v_t . r_hat / s instead (first order in
+    # v_t / s), which a team at s on one circle advances evenly
+    tv_e, tv_n = inputs.target.v_east_m_s, inputs.target.v_north_m_s
+    time_phase = ph.actuator == "radius" and (tv_e != 0.0 or tv_n != 0.0)
+    inv_s = 1.0 / env.cruise_speed_m_s
     phases: list[float] = []
     own_r = 0.0
     for j, (e, n) in enumerate(team):
@@ -428,6 +438,8 @@ def _speed_command(
         r = math.hypot(x, y)
         if ph.predictive:
             theta += phase.arrival_phase_lead(r, radius_m, state.c)
+        if time_phase and r > 0.0:
+            theta += (tv_e * x + tv_n * y) / r * inv_s
         if j == params.index:
             own_r = r
         phases.append(theta)

@@ -245,3 +245,37 @@ def test_the_command_is_finite_within_the_envelope_and_the_course_rate_limit(
     # the filtered radius moved at most 1 m/s (or was pulled into a band that moved)
     moved = abs(new.radius_m - state.radius_m)
     assert moved <= 1.0 * dt + 1e-9 or not (lower <= state.radius_m <= upper)
+
+
+def _time_phase_spaced(eps: float) -> list[float]:
+    """Polar angles (deg, counter-clockwise) whose orbit-time phases psi + eps cos psi are
+    0, 120 and 240 deg (a target moving east at eps * cruise)."""
+    out = []
+    for k in range(3):
+        phi = math.radians(120.0 * k)
+        psi = phi
+        for _ in range(60):
+            psi = phi - eps * math.cos(psi)
+        out.append(math.degrees(psi))
+    return out
+
+
+def test_around_a_moving_target_a_team_spaced_in_orbit_time_holds_r_d():
+    # at a held ground speed the phase rate is uneven round the orbit: a team that keeps its
+    # spacing in time (theta + v_t . r_hat / s) is the steady state, and needs no radius change
+    target = TargetInfo(0.0, 0.0, 1.5, 0.0)
+    degs = _time_phase_spaced(1.5 / 14.0)
+    team = _team(*degs)
+    even = _team(0.0, 120.0, 240.0)
+    for i, deg in enumerate(degs):
+        state = even_state = AgentState()
+        for tick in range(30):
+            t = 0.1 * tick
+            state, cmd, _ = _step(state, _on_circle(deg), team, _params(i), t, target)
+            even_state, even_cmd, _ = _step(
+                even_state, _on_circle(120.0 * i), even, _params(i), t, target
+            )
+        assert cmd.radius_m == RD
+        if i > 0:
+            # spaced evenly in angle instead, the two not at the reference move off r_d
+            assert abs(even_cmd.radius_m - RD) >= 2.0
