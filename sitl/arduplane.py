@@ -10,6 +10,34 @@ MAV_CMD_GUIDED_CHANGE_HEADING / _SPEED / _ALTITUDE checks of
 failsafe of ``check_long_failsafe`` / ``failsafe_long_on_event``, driven by the parameters that
 configure it (SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN, FS_LONG_TIMEOUT), which are read and set
 over MAVLink as ArduPilot's GCS_Param.cpp serves them.
+
+Where it matters to the mission it does what ArduPlane 4.6.2 does (each a ``SimConfig`` option
+whose default is the real behaviour):
+
+- Telemetry rates (``arduplane_stream_rate_hz``): with no request every stream group runs at its
+  SRn_* rate, 1 Hz as shipped (ArduPlane/GCS_Mavlink.cpp ``GCS_MAVLINK_Parameters::var_info``,
+  the groups of ``all_stream_entries``): SYS_STATUS and GPS_RAW_INT (EXT_STAT),
+  GLOBAL_POSITION_INT and LOCAL_POSITION_NED (POSITION), ATTITUDE (EXTRA1), VFR_HUD (EXTRA2),
+  BATTERY_STATUS (EXTRA3); EXTENDED_SYS_STATE, HOME_POSITION and ATTITUDE_QUATERNION only on
+  request. MAV_CMD_SET_MESSAGE_INTERVAL sets one message's interval (GCS_Common.cpp
+  ``set_message_interval``: 0 back to its group's rate, -1 off); REQUEST_DATA_STREAM sets a
+  group's rate (GCS_Param.cpp ``handle_request_data_stream``, start_stop 0 stops it).
+- GUIDED's heading loop (``arduplane_guided_heading = "pid"``, mode_guided.cpp
+  ``ModeGuided::update``): after MAV_CMD_GUIDED_CHANGE_HEADING the bank is GUIDED_P (centidegrees
+  of bank per radian of course-over-ground error; Parameters.h ``guidedHeading``, 5000) times the
+  error, limited to atan(param3 / g) (param3 the lateral acceleration limit, at least 0.05 m/s^2)
+  and to ROLL_LIMIT_DEG (45; LIM_ROLL_CD before 4.5); the turn is the coordinated one,
+  course rate = g tan(bank) / V. At 14 m/s the small-error gain is about 0.6 /s, not 1 /s.
+- GCS failsafe (``arduplane_gcs_seen_at_boot``): the last heartbeat from SYSID_MYGCS starts at
+  the autopilot's boot (ArduPlane/system.cpp ``init_ardupilot``: "reset last heartbeat time"),
+  so FS_GCS_ENABL set more than FS_LONG_TIMEOUT after boot, before a heartbeat from the GCS has
+  been counted, trips it at once (system.cpp ``check_long_failsafe``). It says "GCS Failsafe On:
+  <mode>" and "GCS Failsafe Off" (events.cpp ``failsafe_long_on_event`` / ``_off_event``).
+- GUIDED entered (``arduplane_guided_rebase``): the guided waypoint is the current location,
+  altitude included (mode_guided.cpp ``ModeGuided::_enter``: ``set_guided_WP(current_loc)``), so
+  GUIDED entered on the take-off climb holds that low altitude.
+- Take-off (``takeoff = "runway"``): TAKEOFF while armed starts a ground roll and a climb to the
+  vehicle's altitude (see ``sitl.vehicle``), loitering 200 m ahead.
 """
 
 import logging
@@ -23,6 +51,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from app.core.frames import wrap_pi
 from sitl.config import SimConfig, VehicleConfig
 from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
+from sitl.telemetry import GRAVITY_M_S2
 from sitl.vehicle import (
     ARM_DISARM_FORCE,
     AUTOPILOT_COMPONENT,
@@ -30,6 +59,7 @@ from sitl.vehicle import (
     Outgoing,
     SilenceTimer,
     SimVehicle,
+    StreamTable,
     as_int,
     param_id_text,
 )
@@ -61,6 +91,12 @@ PARAM_FS_LONG_TIMEOUT: Final = "FS_LONG_TIMEOUT"  # AP_Float, s
 # named ARSPD_FBW_MIN / _MAX before ArduPilot 4.5): the vehicle's speed limits
 PARAM_AIRSPEED_MIN: Final = "AIRSPEED_MIN"
 PARAM_AIRSPEED_MAX: Final = "AIRSPEED_MAX"
+# GUIDED's heading PID's P (AP_Float, centidegrees of bank per radian; Parameters.h
+# ``guidedHeading{5000.0, ...}``) and the bank limit (aparm.roll_limit, AP_Float, degrees)
+PARAM_GUIDED_P: Final = "GUIDED_P"
+PARAM_ROLL_LIMIT_DEG: Final = "ROLL_LIMIT_DEG"
+GUIDED_P_DEFAULT: Final = 5000.0
+ROLL_LIMIT_DEG_DEFAULT: Final = 45.0
 PARAM_TYPES: Final = {
     PARAM_SYSID_MYGCS: mavlink.MAV_PARAM_TYPE_INT16,
     PARAM_FS_GCS_ENABL: mavlink.MAV_PARAM_TYPE_INT8,
@@ -68,6 +104,8 @@ PARAM_TYPES: Final = {
     PARAM_FS_LONG_TIMEOUT: mavlink.MAV_PARAM_TYPE_REAL32,
     PARAM_AIRSPEED_MIN: mavlink.MAV_PARAM_TYPE_INT16,
     PARAM_AIRSPEED_MAX: mavlink.MAV_PARAM_TYPE_INT16,
+    PARAM_GUIDED_P: mavlink.MAV_PARAM_TYPE_REAL32,
+    PARAM_ROLL_LIMIT_DEG: mavlink.MAV_PARAM_TYPE_REAL32,
 }
 # ArduPilot 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID (libraries/GCS_MAVLink/GCS.cpp, default
 # 255) and added MAV_GCS_SYSID_HI (default 0): when HI >= MAV_GCS_SYSID every system id from
@@ -178,6 +216,39 @@ ARDUPILOT_CAPABILITIES: Final = (
 )
 ARDUPLANE_VERSION: Final = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reports ArduPlane 4.5.7
 
+# The stream groups (ArduPlane/GCS_Mavlink.cpp STREAM_*_msgs) of the messages the airframe sends,
+# by MAV_DATA_STREAM id; messages in no group are sent only on request
+_M = mavlink
+STREAM_GROUPS: Final[dict[int, tuple[int, ...]]] = {
+    _M.MAV_DATA_STREAM_EXTENDED_STATUS: (
+        _M.MAVLINK_MSG_ID_SYS_STATUS,
+        _M.MAVLINK_MSG_ID_GPS_RAW_INT,
+    ),
+    _M.MAV_DATA_STREAM_POSITION: (
+        _M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+        _M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+    ),
+    _M.MAV_DATA_STREAM_EXTRA1: (_M.MAVLINK_MSG_ID_ATTITUDE,),
+    _M.MAV_DATA_STREAM_EXTRA2: (_M.MAVLINK_MSG_ID_VFR_HUD,),
+    _M.MAV_DATA_STREAM_EXTRA3: (_M.MAVLINK_MSG_ID_BATTERY_STATUS,),
+}
+_ON_REQUEST_ONLY: Final = (
+    _M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+    _M.MAVLINK_MSG_ID_HOME_POSITION,
+    _M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+)
+
+
+def arduplane_streams(rate_hz: float) -> StreamTable:
+    """What ArduPlane streams unasked with every SRn_* rate at ``rate_hz`` (0: nothing but the
+    heartbeat, which ArduPilot always sends at 1 Hz)."""
+    interval = 1.0 / rate_hz if rate_hz > 0.0 else -1.0
+    table: StreamTable = {_M.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
+    for ids in STREAM_GROUPS.values():
+        table.update(dict.fromkeys(ids, interval))
+    table.update(dict.fromkeys(_ON_REQUEST_ONLY, -1.0))
+    return table
+
 
 def long_failsafe_mode(mode_number: int, action: int) -> int | None:
     """The mode ArduPlane's ``failsafe_long_on_event`` switches to from ``mode_number`` when
@@ -242,8 +313,11 @@ class ArduPlaneAutopilot:
     live by the failsafe and GUIDED_CHANGE_SPEED.
     """
 
-    def __init__(self, config: VehicleConfig, sim: SimConfig) -> None:
+    def __init__(self, config: VehicleConfig, sim: SimConfig, boot_offset_s: float = 0.0) -> None:
         self._origin_alt_m = sim.origin_alt_m
+        self._streams = arduplane_streams(sim.arduplane_stream_rate_hz)
+        self._heading_pid = sim.arduplane_guided_heading == "pid"
+        self._rebase = sim.arduplane_guided_rebase
         self._reset_guided()
         failsafe = sim.gcs_failsafe
         new_names = sim.gcs_sysid_param == PARAM_MAV_GCS_SYSID
@@ -264,12 +338,16 @@ class ArduPlaneAutopilot:
             # whole m/s (AP_Int16) within the vehicle's own speed range
             PARAM_AIRSPEED_MIN: float(math.ceil(config.limits.min_speed_m_s)),
             PARAM_AIRSPEED_MAX: float(math.floor(config.limits.max_speed_m_s)),
+            PARAM_GUIDED_P: GUIDED_P_DEFAULT,
+            PARAM_ROLL_LIMIT_DEG: ROLL_LIMIT_DEG_DEFAULT,
         }
         #: parameters whose PARAM_SET is refused as ArduPilot refuses one it may not take over
         #: MAVLink (``allow_set_via_mavlink`` false): "Param write denied" and the old value
         self.param_write_denied: frozenset[str] = frozenset()
         self.gcs_failsafe_active = False
         self._gcs_heard = SilenceTimer()
+        if sim.arduplane_gcs_seen_at_boot:  # init_ardupilot: sysid_myggcs_seen(millis())
+            self._gcs_heard.heard(-boot_offset_s, -math.inf)
         #: modes the GCS may not enter (FLTMODE_GCSBLOCK); a test sets it to refuse a mode
         self.gcs_blocked_modes: frozenset[int] = frozenset()
 
@@ -289,6 +367,10 @@ class ArduPlaneAutopilot:
         return MANUAL
 
     @property
+    def stream_defaults(self) -> StreamTable:
+        return self._streams
+
+    @property
     def guided_targets(self) -> tuple[float | None, float | None, float | None]:
         """(course over ground rad, airspeed m/s, altitude m) set by the guided slew commands."""
         return self._guided_course_rad, self._guided_speed_m_s, self._guided_altitude_m
@@ -299,6 +381,11 @@ class ArduPlaneAutopilot:
         assert isinstance(mode, ArduPlaneMode), mode
         if mode != v.mode:
             self._reset_guided()
+            if mode == GUIDED and self._rebase and v.in_air:
+                # set_guided_WP(current_loc): the altitude it was entered at
+                self._guided_altitude_m = v.air_altitude_m
+                v.altitude_target_m = v.air_altitude_m
+                v.climb_rate_m_s = MAX_CLIMB_RATE_M_S
         v.mode = mode
         v.command = self._mode_command(v, mode)
 
@@ -333,7 +420,7 @@ class ArduPlaneAutopilot:
         if changed:
             self._set_mode(v, mode, t_s)
         if mode == TAKEOFF and v.armed and not v.in_air:
-            v.launch(t_s)
+            v.take_off(t_s)
         return mavlink.MAV_RESULT_ACCEPTED, [v.heartbeat()] if changed else []
 
     def arm(self, v: SimVehicle, t_s: float) -> None:
@@ -342,7 +429,7 @@ class ArduPlaneAutopilot:
             return
         v.armed = True
         if v.mode == TAKEOFF:
-            v.launch(t_s)
+            v.take_off(t_s)
 
     def launched(self, v: SimVehicle, t_s: float) -> None:
         """Launched (in TAKEOFF): fly the current mode from there."""
@@ -360,6 +447,9 @@ class ArduPlaneAutopilot:
             return self._on_gcs_heartbeat(v, msg, t_s, wall_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED:
             return []  # no offboard setpoints (only LOCAL_OFFSET_NED altitude in GUIDED)
+        if msg_id == mavlink.MAVLINK_MSG_ID_REQUEST_DATA_STREAM:
+            self._on_request_data_stream(v, msg, t_s)
+            return []
         if msg_id in (
             mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
             mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
@@ -369,6 +459,26 @@ class ArduPlaneAutopilot:
                 return []
             return self._on_param_message(v, msg)
         return []
+
+    def _on_request_data_stream(
+        self, v: SimVehicle, msg: mavlink.MAVLink_message, t_s: float
+    ) -> None:
+        """GCS_Param.cpp handle_request_data_stream: a group's rate (start_stop 0: stop it;
+        MAV_DATA_STREAM_ALL: every group)."""
+        if msg.target_component not in (0, AUTOPILOT_COMPONENT) or msg.start_stop not in (0, 1):
+            return
+        rate_hz = float(msg.req_message_rate) if msg.start_stop == 1 else 0.0
+        stream = msg.req_stream_id
+        if stream == mavlink.MAV_DATA_STREAM_ALL:
+            groups = list(STREAM_GROUPS.values())
+        elif stream in STREAM_GROUPS:
+            groups = [STREAM_GROUPS[stream]]
+        else:
+            return
+        interval = 1.0 / rate_hz if rate_hz > 0.0 else -1.0
+        for ids in groups:
+            for msg_id in ids:
+                v.set_stream(msg_id, interval, t_s)
 
     # ---- parameters (GCS_Param.cpp) ----------------------------------------------------------
 
@@ -436,7 +546,7 @@ class ArduPlaneAutopilot:
         if not self.gcs_failsafe_active:
             return []
         self.gcs_failsafe_active = False  # the mode is not changed back (failsafe_long_off_event)
-        text = f"Failsafe. Long event off: reason={MODE_REASON_GCS_FAILSAFE}"
+        text = "GCS Failsafe Off"
         log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
         return [v.statustext(mavlink.MAV_SEVERITY_WARNING, text)]
 
@@ -530,6 +640,8 @@ class ArduPlaneAutopilot:
             return denied
         rate = abs(rate) if math.isfinite(rate) else 0.0
         self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S if rate == 0.0 else rate
+        v.altitude_target_m = self._guided_altitude_m
+        v.climb_rate_m_s = min(self._guided_climb_rate_m_s, MAX_CLIMB_RATE_M_S)
         return int(mavlink.MAV_RESULT_ACCEPTED)
 
     def _reposition_guided(
@@ -572,13 +684,13 @@ class ArduPlaneAutopilot:
         ):
             return []
         self.gcs_failsafe_active = True
-        text = f"Failsafe. Long event on: type={FAILSAFE_GCS}/reason={MODE_REASON_GCS_FAILSAFE}"
-        log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
-        out = [v.statustext(mavlink.MAV_SEVERITY_WARNING, text)]
         target = long_failsafe_mode(v.mode.custom_mode, self._param_int(PARAM_FS_LONG_ACTN))
         mode = None if target is None else mode_by_number(target)
         if mode is not None and mode != v.mode:
             self._set_mode(v, mode, t_s)
+        text = f"GCS Failsafe On: {v.mode.name.upper()}"  # the mode it is in now
+        log.info("vehicle %d: %s at t=%.2f s", v.system_id, text, t_s)
+        out = [v.statustext(mavlink.MAV_SEVERITY_WARNING, text)]
         out.append(v.heartbeat())  # system status CRITICAL, and the mode
         v.next_heartbeat_at(t_s + 1.0)
         return out
@@ -590,7 +702,11 @@ class ArduPlaneAutopilot:
         if v.mode == GUIDED:
             command = self._guided_command(v, command)
         course, speed = guide(v.state, command, limits.course_gain_per_s)
-        if isinstance(command, CourseCommand):
+        if isinstance(command, CourseCommand) and self._heading_pid:
+            rate = self.guided_course_rate_rad_s(v, command)
+            rate = max(-limits.max_course_rate_rad_s, min(limits.max_course_rate_rad_s, rate))
+            course = v.state.course_rad + rate / limits.course_gain_per_s
+        elif isinstance(command, CourseCommand):
             course = heading_for_ground_course(
                 course, v.state.speed_m_s, v.wind_east_m_s, v.wind_north_m_s
             )
@@ -602,11 +718,25 @@ class ArduPlaneAutopilot:
                 limits, max_accel_m_s2=min(limits.max_accel_m_s2, self._guided_accel_m_s2)
             )
         v.step(course, speed, limits, dt_s)
-        target = self._guided_altitude_m if v.mode == GUIDED else None
-        if target is not None:
-            climb = min(self._guided_climb_rate_m_s, MAX_CLIMB_RATE_M_S) * dt_s
-            error = target - v.air_altitude_m
-            v.air_altitude_m += max(-climb, min(climb, error))
+
+    def guided_bank_rad(self, v: SimVehicle, command: CourseCommand) -> float:
+        """ModeGuided::update: bank = GUIDED_P * (course over ground error), limited to
+        atan(lateral accel limit / g) and ROLL_LIMIT_DEG (> 0: to the right)."""
+        v_north = v.state.v_north_m_s + v.wind_north_m_s
+        v_east = v.state.v_east_m_s + v.wind_east_m_s
+        ground_course = math.atan2(v_east, v_north)
+        error = wrap_pi(command.course_rad - ground_course)
+        bank = math.radians(self.params[PARAM_GUIDED_P] * error / 100.0)
+        limit = min(
+            math.atan(command.max_lateral_accel_m_s2 / GRAVITY_M_S2),
+            math.radians(max(self.params[PARAM_ROLL_LIMIT_DEG], 0.0)),
+        )
+        return max(-limit, min(limit, bank))
+
+    def guided_course_rate_rad_s(self, v: SimVehicle, command: CourseCommand) -> float:
+        """The coordinated turn at the GUIDED bank: g tan(bank) / V."""
+        speed = max(v.state.speed_m_s, v.config.limits.min_speed_m_s)
+        return GRAVITY_M_S2 * math.tan(self.guided_bank_rad(v, command)) / speed
 
     def _guided_command(self, v: SimVehicle, command: Command) -> Command:
         """GUIDED: the commanded course, else the loiter it entered with, at the guided speed."""

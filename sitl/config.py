@@ -94,10 +94,15 @@ class VehicleConfig:
     altitude_m: float = 100.0
     loiter_radius_m: float | None = None
     loiter_clockwise: bool = True
+    #: how long before the simulation started this vehicle's autopilot booted (s): its
+    #: ``time_boot_ms`` starts there; None: ``SimConfig.boot_spacing_s`` times its index
+    boot_offset_s: float | None = None
 
     def __post_init__(self) -> None:
         _positive("cruise_speed_m_s", self.cruise_speed_m_s)
         _finite("altitude_m", self.altitude_m)
+        if self.boot_offset_s is not None:
+            _non_negative("boot_offset_s", self.boot_offset_s)
         lim = self.limits
         if not lim.min_speed_m_s <= self.cruise_speed_m_s <= lim.max_speed_m_s:
             raise ValueError(
@@ -170,6 +175,20 @@ def stationary_target(east_m: float = 0.0, north_m: float = 0.0) -> TargetPath:
 FailsafeAction = Literal["hold", "return"]
 Autopilot = Literal["px4", "arduplane"]
 GcsFailsafe = Literal["off", "continue", "return"]
+#: how a take-off is flown: "runway" (the real ones: a ground roll from rest, rotation at the
+#: minimum airspeed, a climb to the vehicle's altitude) or "launch" (into the air at the start
+#: state and altitude at once, as a catapult would)
+Takeoff = Literal["runway", "launch"]
+#: PX4's airspeed in OFFBOARD: "trim" (v1.16: FW_AIRSPD_TRIM, DO_CHANGE_SPEED applied only in
+#: AUTO modes) or "setpoint" (the setpoint velocity's magnitude, DO_CHANGE_SPEED in any mode)
+Px4OffboardSpeed = Literal["trim", "setpoint"]
+#: the sign PX4 gives the curvature of an offboard acceleration: "v1.16.0" (the release's
+#: radius = -sign(v x a) v^2 / a_n: a right-turn acceleration feeds a left turn forward, fixed
+#: upstream after the release) or "ned" (a positive radius for a clockwise turn, as documented)
+Px4CurvatureSign = Literal["v1.16.0", "ned"]
+#: ArduPlane GUIDED's course loop: "pid" (GUIDED_P bank per course error, bank limited by
+#: GUIDED_CHANGE_HEADING's param3 and ROLL_LIMIT_DEG) or "ideal" (the airframe's course gain)
+GuidedHeadingLoop = Literal["pid", "ideal"]
 #: the parameter that names ArduPlane's GCS: SYSID_MYGCS up to ArduPilot 4.6, MAV_GCS_SYSID
 #: (with the range's top, MAV_GCS_SYSID_HI) from 4.7
 GcsSysidParam = Literal["SYSID_MYGCS", "MAV_GCS_SYSID"]
@@ -196,6 +215,18 @@ class SimConfig:
     off, as ArduPlane's default; continue; return = RTL) after ``gcs_failsafe_timeout_s``
     (FS_LONG_TIMEOUT) without a HEARTBEAT from system ``gcs_system_id`` (SYSID_MYGCS, or
     MAV_GCS_SYSID when ``gcs_sysid_param`` names ArduPilot 4.7's parameter).
+
+    Boot clocks: vehicle i's autopilot booted ``boot_spacing_s * i`` seconds before the
+    simulation started (unless its ``VehicleConfig.boot_offset_s`` says otherwise), so every
+    vehicle's ``time_boot_ms`` differs, as real autopilots started one after another do.
+
+    Personalities (``sitl.px4``, ``sitl.arduplane`` document each against the autopilot's
+    source): ``takeoff``; ``px4_offboard_speed``, ``px4_trim_airspeed_m_s`` (FW_AIRSPD_TRIM;
+    None: each vehicle's cruise speed) and ``px4_curvature_sign``; ``arduplane_stream_rate_hz``
+    (the SRn_* stream rates, 1 Hz as shipped), ``arduplane_guided_heading``,
+    ``arduplane_gcs_seen_at_boot`` (ArduPlane counts its own boot as the GCS's last heartbeat)
+    and ``arduplane_guided_rebase`` (GUIDED entered holds the altitude it was entered at).
+    Each default is what the real autopilot does.
     """
 
     vehicles: tuple[VehicleConfig, ...]
@@ -221,6 +252,20 @@ class SimConfig:
     gcs_sysid_param: GcsSysidParam = "SYSID_MYGCS"
     camera: CameraConfig = field(default_factory=CameraConfig)
     wind: WindConfig = field(default_factory=WindConfig)
+    boot_spacing_s: float = 3.7
+    takeoff: Takeoff = "runway"
+    px4_offboard_speed: Px4OffboardSpeed = "trim"
+    px4_trim_airspeed_m_s: float | None = None
+    px4_curvature_sign: Px4CurvatureSign = "v1.16.0"
+    arduplane_stream_rate_hz: float = 1.0
+    arduplane_guided_heading: GuidedHeadingLoop = "pid"
+    arduplane_gcs_seen_at_boot: bool = True
+    arduplane_guided_rebase: bool = True
+
+    def boot_offset_s(self, index: int) -> float:
+        """How long before the simulation started vehicle ``index``'s autopilot booted (s)."""
+        own = self.vehicles[index].boot_offset_s
+        return self.boot_spacing_s * index if own is None else own
 
     def __post_init__(self) -> None:
         if not self.vehicles:
@@ -256,6 +301,18 @@ class SimConfig:
         _positive("gcs_failsafe_timeout_s", self.gcs_failsafe_timeout_s)
         if not 1 <= self.gcs_system_id <= 255:
             raise ValueError(f"gcs_system_id must be in 1..255, got {self.gcs_system_id!r}")
+        _non_negative("boot_spacing_s", self.boot_spacing_s)
+        for name, value, allowed in (
+            ("takeoff", self.takeoff, ("runway", "launch")),
+            ("px4_offboard_speed", self.px4_offboard_speed, ("trim", "setpoint")),
+            ("px4_curvature_sign", self.px4_curvature_sign, ("v1.16.0", "ned")),
+            ("arduplane_guided_heading", self.arduplane_guided_heading, ("pid", "ideal")),
+        ):
+            if value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        if self.px4_trim_airspeed_m_s is not None:
+            _positive("px4_trim_airspeed_m_s", self.px4_trim_airspeed_m_s)
+        _non_negative("arduplane_stream_rate_hz", self.arduplane_stream_rate_hz)
         if self.gcs_sysid_param not in ("SYSID_MYGCS", "MAV_GCS_SYSID"):
             raise ValueError(
                 "gcs_sysid_param must be 'SYSID_MYGCS' or 'MAV_GCS_SYSID', got "

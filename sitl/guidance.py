@@ -34,12 +34,15 @@ class LoiterCommand:
 
 @dataclass(frozen=True, slots=True)
 class LineCommand:
-    """Fly the line through a point along a course (position + velocity setpoint, as PX4 does)."""
+    """Fly the line through a point along a course (position + velocity setpoint, as PX4 does),
+    with a path curvature fed forward (1/m, > 0 turning clockwise; PX4's offboard acceleration).
+    """
 
     east_m: float
     north_m: float
     course_rad: float
     speed_m_s: float
+    curvature_per_m: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,13 +66,17 @@ def guide(state: FixedWingState, cmd: Command, course_gain_per_s: float) -> tupl
     atan(d / R), d the distance off the circle), plus the circle's own turn rate fed forward
     through the course loop's gain so the P loop of eq. (2) settles on the circle, not off it.
     At the centre (r -> 0) the bearing is undefined: fly the current course outward.
+    Line: the course to the line through a look-ahead point, plus the path's curvature as the
+    turn rate V * curvature, fed forward the same way.
     """
     if isinstance(cmd, VelocityCommand | CourseCommand):
         return cmd.course_rad, cmd.speed_m_s
     if isinstance(cmd, LineCommand):
         right_e, right_n = math.cos(cmd.course_rad), -math.sin(cmd.course_rad)
         cross_m = (state.east_m - cmd.east_m) * right_e + (state.north_m - cmd.north_m) * right_n
-        return cmd.course_rad - math.atan(cross_m / LINE_LOOKAHEAD_M), cmd.speed_m_s
+        course = cmd.course_rad - math.atan(cross_m / LINE_LOOKAHEAD_M)
+        feed_forward = state.speed_m_s * cmd.curvature_per_m / course_gain_per_s
+        return course + feed_forward, cmd.speed_m_s
     d_east = state.east_m - cmd.center_east_m
     d_north = state.north_m - cmd.center_north_m
     r = math.hypot(d_east, d_north)

@@ -2,17 +2,41 @@
 takes and the parameters it honours, and its offboard-loss failsafe.
 
 Over one ``sitl.vehicle.SimVehicle`` airframe (select it with ``SimConfig(autopilot="px4")``,
-the default). Before arming the vehicle stands at its launch point on the ground; arming
-launches it (as a catapult would) into its configured start state, in the air, in the current
-mode (hold at boot). It flies offboard velocity, position and position+velocity setpoints,
-holds, returns to its launch point, and falls back to hold (or return) when offboard setpoints
-stop.
+the default). It flies offboard velocity, position and position+velocity setpoints, holds,
+returns to its launch point, and falls back to hold (or return) when offboard setpoints stop.
+
+Where it matters to the mission it does what PX4 v1.16.0 does (each a ``SimConfig`` option
+whose default is the real behaviour):
+
+- Airspeed in OFFBOARD (``px4_offboard_speed = "trim"``): a position or position+velocity
+  setpoint is flown at FW_AIRSPD_TRIM whatever the velocity's magnitude:
+  src/modules/fw_pos_control/FixedwingPositionControl.cpp ``Run`` sets the position setpoint's
+  ``cruising_speed = NAN`` on every offboard trajectory setpoint and ``adapt_airspeed_setpoint``
+  turns NaN into the trim airspeed. MAV_CMD_DO_CHANGE_SPEED is ACKed ACCEPTED
+  (navigator/navigator_main.cpp ``run``) but applied only in AUTO modes
+  (FixedwingPositionControl.cpp ``vehicle_command_poll``: FW_POSCTRL_MODE_AUTO; the next offboard
+  setpoint clears it again); entering hold, take-off or return resets it to trim
+  (navigator/loiter.cpp, takeoff.cpp, rtl_direct.cpp ``reset_cruising_speed``).
+  FW_AIRSPD_TRIM is served and settable (``px4_trim_airspeed_m_s``; default: the vehicle's
+  cruise speed; the stock value is 15 m/s). A velocity-only setpoint is flown at its own speed:
+  that is this simulator's own extension (real PX4 keeps its attitude), for the velocity adapter.
+- Acceleration in SET_POSITION_TARGET_LOCAL_NED (used when its type_mask does not ignore AX/AY,
+  with a velocity): its component normal to the velocity is a path curvature fed forward,
+  radius = direction * v^2 / |a_n| (FixedwingPositionControl.cpp ``Run``, the offboard branch;
+  ``control_auto_path`` passes 1 / loiter_radius to NPFG). In v1.16.0 direction is
+  -sign(v x a_n) (x north, y east), so a clockwise-turning acceleration feeds a counter-clockwise
+  curvature forward (``px4_curvature_sign = "v1.16.0"``; PX4 fixed the sign after the release,
+  PR #27582: ``"ned"``).
+- Take-off (``takeoff = "runway"``, airframe 10041 sets RWTO_TKOFF 1): arming leaves it on the
+  ground; MAV_CMD_NAV_TAKEOFF (or the take-off mode) while armed starts the ground roll; the land
+  detector reports "in air" during the roll (see ``sitl.vehicle``); take-off ends in hold once
+  the climb has reached the vehicle's altitude. ``"launch"``: arming launches it at once.
 """
 
 import logging
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 from pymavlink import mavutil
@@ -25,10 +49,12 @@ from sitl.guidance import Command, LineCommand, LoiterCommand, VelocityCommand, 
 from sitl.vehicle import (
     ARM_DISARM_FORCE,
     AUTOPILOT_COMPONENT,
+    PX4_STREAMS,
     FlightMode,
     Outgoing,
     SilenceTimer,
     SimVehicle,
+    StreamTable,
     as_int,
     param_id_text,
 )
@@ -61,8 +87,17 @@ TAKEOFF: Final = Px4Mode(
 )
 _MODES_BY_CUSTOM: Final = {(m.main, m.sub): m for m in (OFFBOARD, HOLD, RETURN, TAKEOFF)}
 
+#: a launched take-off ("launch") holds after this long; a runway take-off once within
+#: TAKEOFF_ALTITUDE_TOLERANCE_M of the vehicle's altitude
 TAKEOFF_DURATION_S: Final = 5.0
+TAKEOFF_ALTITUDE_TOLERANCE_M: Final = 1.0
 MIN_VELOCITY_SETPOINT_M_S: Final = 0.5
+#: an acceleration normal to the velocity below this (m/s^2) gives no curvature (PX4: a zero
+#: normal has no direction, the radius is NaN and the curvature 0)
+MIN_NORMAL_ACCEL_M_S2: Final = 1e-6
+_ACCEL_IGNORE: Final = (
+    mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE
+)
 
 # The PX4 parameters the simulator honours, in PARAM_REQUEST_LIST order
 PARAM_OFFBOARD_LOSS_TIMEOUT: Final = "COM_OF_LOSS_T"  # s, simulated
@@ -89,8 +124,13 @@ class Px4Autopilot:
     """PX4 behind one simulated airframe: the mode it is in, its offboard setpoint and failsafe
     parameters (COM_OF_LOSS_T, COM_OBL_RC_ACT), settable over MAVLink."""
 
-    def __init__(self, sim: SimConfig) -> None:
+    def __init__(self, sim: SimConfig, trim_airspeed_m_s: float) -> None:
         self.offboard_setpoint: Command | None = None
+        #: FW_AIRSPD_TRIM (m/s)
+        self.trim_airspeed_m_s = trim_airspeed_m_s
+        self._offboard_speed = sim.px4_offboard_speed
+        self._curvature_sign = -1.0 if sim.px4_curvature_sign == "v1.16.0" else 1.0
+        self._runway = sim.takeoff == "runway"
         self.offboard_timeout_s = sim.offboard_timeout_s
         self.failsafe_action = sim.failsafe_action
         self._offboard_min_wall_s = sim.offboard_timeout_min_wall_s
@@ -100,6 +140,14 @@ class Px4Autopilot:
     @property
     def boot_mode(self) -> FlightMode:
         return HOLD
+
+    @property
+    def stream_defaults(self) -> StreamTable:
+        return PX4_STREAMS
+
+    @property
+    def _trim_in_offboard(self) -> bool:
+        return self._offboard_speed == "trim"
 
     # ---- modes -------------------------------------------------------------------------------
 
@@ -114,10 +162,17 @@ class Px4Autopilot:
             out.append(v.statustext(mavlink.MAV_SEVERITY_WARNING, text))
             out.append(v.heartbeat())
             v.next_heartbeat_at(t_s + v.stream_interval_s(mavlink.MAVLINK_MSG_ID_HEARTBEAT))
-        if v.mode is TAKEOFF and t_s - self._mode_entered_t_s >= TAKEOFF_DURATION_S:
+        if v.mode is TAKEOFF and self._takeoff_done(v, t_s):
             self._set_mode(v, HOLD, t_s)
             out.append(v.statustext(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding"))
         return out
+
+    def _takeoff_done(self, v: SimVehicle, t_s: float) -> bool:
+        if not v.in_air:
+            return False
+        if not self._runway:
+            return t_s - self._mode_entered_t_s >= TAKEOFF_DURATION_S
+        return v.air_altitude_m >= v.altitude_target_m - TAKEOFF_ALTITUDE_TOLERANCE_M
 
     def _offboard_lost(self, t_s: float, wall_s: float) -> bool:
         return self._setpoints.silent(
@@ -127,30 +182,47 @@ class Px4Autopilot:
     def fly(self, v: SimVehicle, dt_s: float) -> None:
         """One physics step in the air, flying the current command."""
         if v.mode is OFFBOARD and self.offboard_setpoint is not None:
-            v.command = self.offboard_setpoint
+            v.command = self._offboard_command(self.offboard_setpoint)
         limits = v.config.limits
         course_cmd, speed_cmd = guide(v.state, v.command or v.hold_here(), limits.course_gain_per_s)
         v.step(course_cmd, speed_cmd, limits, dt_s)
 
+    def _offboard_command(self, setpoint: Command) -> Command:
+        """A position (+velocity) setpoint flown at FW_AIRSPD_TRIM (cruising_speed NaN)."""
+        if self._trim_in_offboard and isinstance(setpoint, LineCommand | LoiterCommand):
+            return replace(setpoint, speed_m_s=self.trim_airspeed_m_s)
+        return setpoint
+
     def _set_mode(self, v: SimVehicle, mode: FlightMode, t_s: float) -> None:
+        if mode is not v.mode and mode in (HOLD, TAKEOFF, RETURN) and self._trim_in_offboard:
+            v.cruise_speed_m_s = self.trim_airspeed_m_s  # navigator: reset_cruising_speed()
         v.mode = mode
         self._mode_entered_t_s = t_s
-        if mode is HOLD or mode is TAKEOFF:
+        if mode is TAKEOFF and self._runway:
+            s = v.state  # straight on along the runway until the climb is done
+            v.command = LineCommand(s.east_m, s.north_m, s.course_rad, v.cruise_speed_m_s)
+        elif mode is HOLD or mode is TAKEOFF:
             v.command = v.hold_here()
         elif mode is RETURN:
             v.command = v.loiter_at(v.home_east_m, v.home_north_m)
         elif mode is OFFBOARD:
-            v.command = self.offboard_setpoint
+            setpoint = self.offboard_setpoint
+            v.command = None if setpoint is None else self._offboard_command(setpoint)
 
     def launched(self, v: SimVehicle, t_s: float) -> None:
-        """The airframe has just been launched: fly the current mode from here."""
+        """The airframe has just been launched (or has rotated): fly the current mode."""
+        entered = self._mode_entered_t_s
         self._set_mode(v, v.mode, t_s)
+        self._mode_entered_t_s = entered
 
     def arm(self, v: SimVehicle, t_s: float) -> None:
-        """Arm and launch (no-op when armed)."""
-        if not v.armed:
-            v.armed = True
-            v.launch(t_s)
+        """Arm (no-op when armed): on the runway it stays on the ground unless in take-off;
+        with ``takeoff = "launch"`` arming launches it."""
+        if v.armed:
+            return
+        v.armed = True
+        if not self._runway or v.mode is TAKEOFF:
+            v.take_off(t_s)
 
     # ---- incoming ----------------------------------------------------------------------------
 
@@ -214,7 +286,14 @@ class Px4Autopilot:
         speed = math.hypot(msg.vx, msg.vy) if use_velocity else 0.0
         setpoint: Command
         if use_position and use_velocity and speed >= MIN_VELOCITY_SETPOINT_M_S:
-            setpoint = LineCommand(msg.y, msg.x, math.atan2(msg.vy, msg.vx), speed)
+            curvature = 0.0
+            if not mask & _ACCEL_IGNORE:
+                if not (math.isfinite(msg.afx) and math.isfinite(msg.afy)):
+                    log.debug("vehicle %d: non-finite acceleration dropped", v.system_id)
+                    return
+                curvature = self.curvature_per_m(msg.vx, msg.vy, msg.afx, msg.afy)
+            course = math.atan2(msg.vy, msg.vx)
+            setpoint = LineCommand(msg.y, msg.x, course, speed, curvature)
         elif use_position:
             setpoint = v.loiter_at(msg.y, msg.x)
         elif use_velocity and speed >= MIN_VELOCITY_SETPOINT_M_S:
@@ -229,7 +308,23 @@ class Px4Autopilot:
         self.offboard_setpoint = setpoint
         self._setpoints.heard(t_s, wall_s)
         if v.mode is OFFBOARD:
-            v.command = setpoint
+            v.command = self._offboard_command(setpoint)
+
+    def curvature_per_m(
+        self, v_north_m_s: float, v_east_m_s: float, a_north_m_s2: float, a_east_m_s2: float
+    ) -> float:
+        """The path curvature (1/m, > 0 clockwise) PX4 feeds forward for an offboard velocity and
+        acceleration: 1 / loiter_radius with loiter_radius = direction * v^2 / |a_normal|."""
+        speed = math.hypot(v_north_m_s, v_east_m_s)
+        un, ue = v_north_m_s / speed, v_east_m_s / speed
+        along = a_north_m_s2 * un + a_east_m_s2 * ue
+        an, ae = a_north_m_s2 - along * un, a_east_m_s2 - along * ue
+        normal = math.hypot(an, ae)
+        if normal < MIN_NORMAL_ACCEL_M_S2:
+            return 0.0
+        cross = un * ae - ue * an  # v x a_n in (north, east): > 0 turning clockwise
+        direction = self._curvature_sign * math.copysign(1.0, cross)
+        return direction * normal / (speed * speed)
 
     def run_command(
         self,
@@ -266,7 +361,7 @@ class Px4Autopilot:
         changed = mode is not v.mode
         self._set_mode(v, mode, t_s)
         if mode is TAKEOFF and v.armed and not v.in_air:
-            v.launch(t_s)
+            v.take_off(t_s)
         out = [v.heartbeat()] if changed else []
         return mavlink.MAV_RESULT_ACCEPTED, out
 
@@ -308,19 +403,28 @@ class Px4Autopilot:
             return mavlink.MAV_RESULT_DENIED, []
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return mavlink.MAV_RESULT_DENIED, []
-        if math.isfinite(p[0]) and p[0] > 0.0:
-            self._change_speed(v, p[0])
         east, north = v.local_of(lat, lon)
         changed = v.mode is not HOLD
+        if changed and self._trim_in_offboard:
+            v.cruise_speed_m_s = self.trim_airspeed_m_s  # Loiter::on_activation
+        if math.isfinite(p[0]) and p[0] > 0.0:
+            self._apply_speed(v, p[0])
         v.mode = HOLD
         self._mode_entered_t_s = t_s
         v.command = v.loiter_at(east, north)
         return mavlink.MAV_RESULT_ACCEPTED, [v.heartbeat()] if changed else []
 
     def _change_speed(self, v: SimVehicle, speed_m_s: float) -> int:
+        """MAV_CMD_DO_CHANGE_SPEED: ACCEPTED; in OFFBOARD (real PX4) it changes nothing."""
+        if not (self._trim_in_offboard and v.mode is OFFBOARD):
+            self._apply_speed(v, speed_m_s)
+        return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _apply_speed(self, v: SimVehicle, speed_m_s: float) -> None:
+        """The AUTO modes' cruising speed (<= 0 or NaN: back to trim)."""
         limits = v.config.limits
-        if speed_m_s < 0.0 or not math.isfinite(speed_m_s):
-            v.cruise_speed_m_s = v.config.cruise_speed_m_s
+        if not (math.isfinite(speed_m_s) and speed_m_s > 0.0):
+            v.cruise_speed_m_s = self.trim_airspeed_m_s
         else:
             v.cruise_speed_m_s = limits.clamp_speed(speed_m_s)
         cmd = v.command
@@ -332,7 +436,6 @@ class Px4Autopilot:
                 cmd.clockwise,
                 v.cruise_speed_m_s,
             )
-        return int(mavlink.MAV_RESULT_ACCEPTED)
 
     # ---- parameters --------------------------------------------------------------------------
 
@@ -342,7 +445,7 @@ class Px4Autopilot:
         if name == PARAM_OFFBOARD_LOSS_ACTION:
             return _PX4_RETURN_ACTION if self.failsafe_action == "return" else _PX4_HOLD_ACTION
         if name == PARAM_CRUISE_SPEED:
-            return v.cruise_speed_m_s
+            return self.trim_airspeed_m_s
         if name == PARAM_AIRSPEED_MIN:
             return v.config.limits.min_speed_m_s
         if name == PARAM_AIRSPEED_MAX:
@@ -360,9 +463,17 @@ class Px4Autopilot:
         if name == PARAM_OFFBOARD_LOSS_TIMEOUT and wire_value > 0.0:
             self.offboard_timeout_s = wire_value
         elif name == PARAM_CRUISE_SPEED and wire_value > 0.0:
-            self._change_speed(v, wire_value)
+            self.set_trim_airspeed(v, wire_value)
         elif name == PARAM_LOITER_RADIUS and wire_value >= 1.05 * v.config.min_turn_radius_m:
             v.loiter_radius_m = wire_value
+
+    def set_trim_airspeed(self, v: SimVehicle, speed_m_s: float) -> None:
+        """FW_AIRSPD_TRIM, within the airspeed limits: flown in OFFBOARD from the next step, and
+        in the AUTO modes where no cruising speed was commanded."""
+        old = self.trim_airspeed_m_s
+        self.trim_airspeed_m_s = v.config.limits.clamp_speed(speed_m_s)
+        if not self._trim_in_offboard or v.cruise_speed_m_s == old:
+            self._apply_speed(v, self.trim_airspeed_m_s)
 
     def _param_value(self, v: SimVehicle, name: str) -> Outgoing:
         names = list(_PARAM_TYPES)

@@ -55,11 +55,13 @@ OBSERVATION_LOG_LENGTH = 10_000
 RECEIVE_BUFFER_BYTES = 1 << 20
 
 
-def autopilot_for(vehicle: VehicleConfig, sim: SimConfig) -> Autopilot:
-    """The autopilot personality ``sim.autopilot`` names, for one vehicle."""
+def autopilot_for(vehicle: VehicleConfig, sim: SimConfig, index: int = 0) -> Autopilot:
+    """The autopilot personality ``sim.autopilot`` names, for vehicle ``index``."""
     if sim.autopilot == "arduplane":
-        return ArduPlaneAutopilot(vehicle, sim)
-    return Px4Autopilot(sim)
+        return ArduPlaneAutopilot(vehicle, sim, sim.boot_offset_s(index))
+    trim = sim.px4_trim_airspeed_m_s
+    trim_m_s = vehicle.cruise_speed_m_s if trim is None else vehicle.limits.clamp_speed(trim)
+    return Px4Autopilot(sim, trim_m_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,7 +169,7 @@ class SimulatorServer:
                 config,
                 TrackingCamera(config.camera, np.random.default_rng(seeds[i + 1])),
                 self._geodesy,
-                autopilot_for(vc, config),
+                autopilot_for(vc, config, i),
             )
             for i, vc in enumerate(config.vehicles)
         )

@@ -7,6 +7,22 @@ the commands and parameters, and the failsafes, and acts on the airframe it is g
 No sockets and no clock here: ``handle`` takes a decoded message and the current simulated (and
 wall) time and returns the replies; ``advance`` steps the flight by one physics step; ``telemetry``
 returns the streams that are due. The server (``sitl.server``) does the I/O.
+
+What the airframe does as the real ones do:
+
+- Boot clock: every time field (``time_boot_ms``, ``time_usec``, TIMESYNC) counts from the
+  vehicle's own boot, ``SimConfig.boot_offset_s(i)`` before the simulation started, so vehicles
+  started one after another report different clocks.
+- Take-off (``SimConfig.takeoff = "runway"``): a ground roll from rest along the start course at
+  ``ROLL_ACCEL_M_S2``, rotation at the minimum airspeed, then a climb at ``CLIMB_RATE_M_S`` to the
+  vehicle's altitude. The landed state it reports (EXTENDED_SYS_STATE) follows PX4's fixed-wing
+  land detector (src/modules/land_detector/FixedwingLandDetector.cpp ``_get_landed_state``):
+  landed while the low-passed airspeed is under LNDFW_AIRSPD_MAX (6 m/s) and the low-passed
+  ground speed under LNDFW_VEL_XY_MAX (5 m/s), filters 0.95/0.05 and 0.97/0.03 run every 50 ms,
+  flying at once (FLYING_TRIGGER_TIME_US = 0): "in air" comes during the ground roll, at about
+  9 m/s and no height, not at a safe height.
+- Altitude: the airframe climbs or sinks toward ``altitude_target_m`` at ``climb_rate_m_s``;
+  the personalities set the target (take-off, GUIDED entry, GUIDED_CHANGE_ALTITUDE).
 """
 
 import math
@@ -39,9 +55,23 @@ class FlightMode(Protocol):
     def custom_mode(self) -> int: ...
 
 
+#: ground roll acceleration (m/s^2) and climb rate after rotation (m/s; FW_T_CLMB_MAX and
+#: TECS_CLMB_MAX are 5 m/s by default)
+ROLL_ACCEL_M_S2: Final = 3.0
+CLIMB_RATE_M_S: Final = 5.0
+#: PX4's fixed-wing land detector (FixedwingLandDetector.cpp, land_detector_params_fw.c): the
+#: thresholds and the time constants of its two low-pass filters run every 50 ms
+LNDFW_AIRSPD_MAX_M_S: Final = 6.0
+LNDFW_VEL_XY_MAX_M_S: Final = 5.0
+LAND_DETECTOR_PERIOD_S: Final = 0.05
+AIRSPEED_FILTER_TAU_S: Final = LAND_DETECTOR_PERIOD_S / -math.log(0.95)
+GROUND_SPEED_FILTER_TAU_S: Final = LAND_DETECTOR_PERIOD_S / -math.log(0.97)
+
 # message id -> default interval in simulated seconds (None: telemetry_rate_hz); -1: off
 _HEARTBEAT_ID: Final = mavlink.MAVLINK_MSG_ID_HEARTBEAT
-_DEFAULT_STREAMS: Final[dict[int, float | None]] = {
+StreamTable = dict[int, float | None]
+#: the streams PX4 sends (at the simulator's telemetry rate) without being asked
+PX4_STREAMS: Final[StreamTable] = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
     mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 0.2,
@@ -102,6 +132,13 @@ class Autopilot(Protocol):
         """The mode it boots in."""
         ...
 
+    @property
+    def stream_defaults(self) -> StreamTable:
+        """The streams it sends without being asked (message id -> interval s; None: the
+        simulator's telemetry rate; negative: only on request), and the set a message interval
+        of 0 returns a message to."""
+        ...
+
     def mode_events(self, v: "SimVehicle", t_s: float, wall_s: float) -> list[Outgoing]:
         """Mode changes that happen on their own at ``t_s`` (failsafes, end of take-off)."""
         ...
@@ -155,6 +192,8 @@ class VehicleTruth:
     command: Command | None
     link_up: bool
     camera_enabled: bool
+    #: the landed state it reports (EXTENDED_SYS_STATE): "in air" already during a ground roll
+    landed_state_in_air: bool = False
 
 
 class SimVehicle:
@@ -177,6 +216,8 @@ class SimVehicle:
     ) -> None:
         self.index = index
         self.system_id = index + 1
+        #: how long before simulated time 0 its autopilot booted (s)
+        self.boot_offset_s = sim.boot_offset_s(index)
         self.config = config
         self.autopilot = autopilot
         self._sim = sim
@@ -193,6 +234,13 @@ class SimVehicle:
         self._home_lla = geodesy.to_geodetic(self.home_east_m, self.home_north_m, 0.0)
         self.armed = False
         self.in_air = False
+        #: on the runway, rolling for take-off (``in_air`` turns true at rotation)
+        self.rolling = False
+        self._filtered_airspeed_m_s = 0.0
+        self._filtered_ground_speed_m_s = 0.0
+        #: the altitude (m above home) the airframe climbs or sinks to, and how fast (m/s)
+        self.altitude_target_m = config.altitude_m
+        self.climb_rate_m_s = CLIMB_RATE_M_S
         self.mode: FlightMode = autopilot.boot_mode
         self.command: Command | None = None
         self.cruise_speed_m_s = config.cruise_speed_m_s
@@ -201,8 +249,8 @@ class SimVehicle:
         self.air_altitude_m = config.altitude_m
         self._streams: dict[int, float] = {}
         self._next_due: dict[int, float] = {}
-        for msg_id, interval in _DEFAULT_STREAMS.items():
-            self._set_stream(msg_id, interval, 0.0)
+        for msg_id, interval in autopilot.stream_defaults.items():
+            self.set_stream(msg_id, interval, 0.0)
         self._camera_period_s = 1.0 / camera.config.rate_hz
         self._next_camera_t_s = 0.0
         self._battery_fraction = 1.0
@@ -225,11 +273,27 @@ class SimVehicle:
             command=self.command if self.in_air else None,
             link_up=link_up,
             camera_enabled=self.camera.enabled,
+            landed_state_in_air=self.landed_state_in_air,
         )
 
     @property
     def altitude_m(self) -> float:
         return self.air_altitude_m if self.in_air else 0.0
+
+    @property
+    def landed_state_in_air(self) -> bool:
+        """PX4's fixed-wing land detector: flying once either low-passed speed is over its
+        threshold (while armed), so already during the ground roll."""
+        if self.in_air:
+            return True
+        return self.armed and (
+            self._filtered_airspeed_m_s > LNDFW_AIRSPD_MAX_M_S
+            or self._filtered_ground_speed_m_s > LNDFW_VEL_XY_MAX_M_S
+        )
+
+    def boot_time_s(self, t_s: float) -> float:
+        """Simulated time ``t_s`` on the vehicle's own boot clock (s since its boot)."""
+        return t_s + self.boot_offset_s
 
     # ---- flight ------------------------------------------------------------------------------
 
@@ -239,11 +303,52 @@ class SimVehicle:
         """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s`` in the wind."""
         self.wind_east_m_s, self.wind_north_m_s = wind_east_m_s, wind_north_m_s
         out = self.autopilot.mode_events(self, t_s, wall_s)
-        if not self.in_air:
-            return out
-        self.autopilot.fly(self, dt_s)
-        self._battery_fraction = max(0.0, self._battery_fraction - dt_s / 3600.0)
+        if self.rolling:
+            self._roll(dt_s, t_s)
+        elif self.in_air:
+            self.autopilot.fly(self, dt_s)
+            self._climb(dt_s)
+        self._detect(dt_s)
+        if self.in_air or self.rolling:
+            self._battery_fraction = max(0.0, self._battery_fraction - dt_s / 3600.0)
         return out
+
+    def _roll(self, dt_s: float, t_s: float) -> None:
+        """One step of the ground roll: straight on along the runway, accelerating; rotate (into
+        the air, height 0, climbing to the vehicle's altitude) at the minimum airspeed."""
+        s = self.state
+        rotate_m_s = self.config.limits.min_speed_m_s
+        speed = min(s.speed_m_s + ROLL_ACCEL_M_S2 * dt_s, rotate_m_s)
+        mean = 0.5 * (s.speed_m_s + speed)
+        self.state = FixedWingState(
+            s.east_m + mean * dt_s * math.sin(s.course_rad),
+            s.north_m + mean * dt_s * math.cos(s.course_rad),
+            s.course_rad,
+            speed,
+        )
+        if speed >= rotate_m_s:
+            self.rolling = False
+            self.in_air = True
+            self.air_altitude_m = 0.0
+            self.altitude_target_m = self.config.altitude_m
+            self.climb_rate_m_s = CLIMB_RATE_M_S
+            self.autopilot.launched(self, t_s)
+
+    def _climb(self, dt_s: float) -> None:
+        step_m = self.climb_rate_m_s * dt_s
+        error = self.altitude_target_m - self.air_altitude_m
+        self.air_altitude_m += max(-step_m, min(step_m, error))
+
+    def _detect(self, dt_s: float) -> None:
+        """The land detector's two low-pass filters (airspeed, ground speed)."""
+        moving = self.in_air or self.rolling
+        airspeed = self.state.speed_m_s if moving else 0.0
+        v_north, v_east = self._ground_velocity() if moving else (0.0, 0.0)
+        ground = math.hypot(v_north, v_east)
+        a = 1.0 - math.exp(-dt_s / AIRSPEED_FILTER_TAU_S)
+        g = 1.0 - math.exp(-dt_s / GROUND_SPEED_FILTER_TAU_S)
+        self._filtered_airspeed_m_s += a * (airspeed - self._filtered_airspeed_m_s)
+        self._filtered_ground_speed_m_s += g * (ground - self._filtered_ground_speed_m_s)
 
     def step(
         self, course_cmd_rad: float, speed_cmd_m_s: float, limits: VehicleEnvelope, dt_s: float
@@ -287,10 +392,23 @@ class SimVehicle:
         east, north, _ = self._geodesy.to_local(lat_deg, lon_deg, self._sim.origin_alt_m)
         return east, north
 
+    def take_off(self, t_s: float) -> None:
+        """Start the take-off ``SimConfig.takeoff`` names: a ground roll, or a launch."""
+        if self.in_air or self.rolling:
+            return
+        if self._sim.takeoff == "launch":
+            self.launch(t_s)
+            return
+        self.rolling = True
+        self.state = FixedWingState(
+            self.state.east_m, self.state.north_m, self.config.start.course_rad, 0.0
+        )
+
     def launch(self, t_s: float) -> None:
         """Into the air (as a catapult would) at its configured start course, speed, height."""
         start = self.config.start
         self.air_altitude_m = self.config.altitude_m
+        self.altitude_target_m = self.config.altitude_m
         self.state = FixedWingState(
             east_m=self.state.east_m,
             north_m=self.state.north_m,
@@ -308,6 +426,7 @@ class SimVehicle:
         """Disarmed: on the ground, at rest where it is."""
         self.armed = False
         self.in_air = False
+        self.rolling = False
         self.state = FixedWingState(
             self.state.east_m, self.state.north_m, self.state.course_rad, 0.0
         )
@@ -349,9 +468,8 @@ class SimVehicle:
             )
             return [(AUTOPILOT_COMPONENT, reply)]
         if msg_id == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0:
-            return [
-                (AUTOPILOT_COMPONENT, mavlink.MAVLink_timesync_message(round(t_s * 1e9), msg.ts1))
-            ]
+            tc1 = round(self.boot_time_s(t_s) * 1e9)
+            return [(AUTOPILOT_COMPONENT, mavlink.MAVLink_timesync_message(tc1, msg.ts1))]
         return self.autopilot.handle(self, msg, t_s, wall_s)
 
     def _on_command(
@@ -395,19 +513,23 @@ class SimVehicle:
             msg_id, interval_us = as_int(p[0], -1), p[1]
             if math.isnan(interval_us):
                 interval_us = 0.0
-            if msg_id not in _DEFAULT_STREAMS:
+            defaults = self.autopilot.stream_defaults
+            if msg_id not in defaults:
                 return mavlink.MAV_RESULT_UNSUPPORTED, []
             if interval_us == 0:
-                self._set_stream(msg_id, _DEFAULT_STREAMS[msg_id], t_s)
+                self.set_stream(msg_id, defaults[msg_id], t_s)
             elif interval_us < 0:
-                self._set_stream(msg_id, -1.0, t_s)
+                self.set_stream(msg_id, -1.0, t_s)
             else:
-                self._set_stream(msg_id, interval_us * 1e-6, t_s)
+                self.set_stream(msg_id, interval_us * 1e-6, t_s)
             return accepted, []
         return None
 
-    def _set_stream(self, msg_id: int, interval_s: float | None, t_s: float) -> None:
+    def set_stream(self, msg_id: int, interval_s: float | None, t_s: float) -> None:
+        """Stream ``msg_id`` every ``interval_s`` (None: the telemetry rate; <= 0: off) from
+        ``t_s``."""
         interval = 1.0 / self._sim.telemetry_rate_hz if interval_s is None else interval_s
+        interval = -1.0 if interval <= 0.0 else interval
         self._streams[msg_id] = interval
         self._next_due[msg_id] = t_s
 
@@ -463,6 +585,7 @@ class SimVehicle:
 
     def _build(self, msg_id: int, t_s: float, geo: GeoLookup) -> mavlink.MAVLink_message | None:
         s = self.state
+        t_s = self.boot_time_s(t_s)  # every time field counts from the vehicle's own boot
         if msg_id == _HEARTBEAT_ID:
             return self.autopilot.heartbeat(self)
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
@@ -472,7 +595,7 @@ class SimVehicle:
                 *self._home_lla, self.home_east_m, self.home_north_m, t_s
             )
         if msg_id == mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
-            return telemetry.extended_sys_state(self.in_air)
+            return telemetry.extended_sys_state(self.landed_state_in_air)
         if msg_id == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
             return telemetry.sys_status(self._battery_fraction)
         if msg_id == mavlink.MAVLINK_MSG_ID_BATTERY_STATUS:
@@ -487,7 +610,7 @@ class SimVehicle:
         if msg_id == mavlink.MAVLINK_MSG_ID_VFR_HUD:
             ground_speed = math.hypot(v_north, v_east)
             alt_amsl = self._sim.origin_alt_m + self.altitude_m
-            return telemetry.vfr_hud(s, ground_speed, self.in_air, alt_amsl)
+            return telemetry.vfr_hud(s, ground_speed, self.in_air or self.rolling, alt_amsl)
         if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             return telemetry.global_position_int(geo(), self.altitude_m, v_north, v_east, s, t_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_GPS_RAW_INT:
@@ -495,8 +618,11 @@ class SimVehicle:
         return None
 
     def _ground_velocity(self) -> tuple[float, float]:
-        """(north, east) ground velocity: airspeed along the heading plus the wind drift."""
+        """(north, east) ground velocity: airspeed along the heading plus the wind drift (on
+        the runway the wheels hold the track)."""
         s = self.state
+        if self.rolling:
+            return s.v_north_m_s, s.v_east_m_s
         return s.v_north_m_s + self.wind_north_m_s, s.v_east_m_s + self.wind_east_m_s
 
     def heartbeat(self) -> Outgoing:
@@ -505,7 +631,7 @@ class SimVehicle:
 
     def _home_position(self, t_s: float) -> Outgoing:
         return AUTOPILOT_COMPONENT, telemetry.home_position(
-            *self._home_lla, self.home_east_m, self.home_north_m, t_s
+            *self._home_lla, self.home_east_m, self.home_north_m, self.boot_time_s(t_s)
         )
 
     def statustext(self, severity: int, text: str) -> Outgoing:

@@ -72,7 +72,7 @@ def _bad_packets(rng: random.Random, other_ids: list[int]) -> list[bytes]:
 
 @pytest.mark.slow
 async def test_bad_input_and_a_10000_packet_burst_neither_crash_nor_stall():
-    config = sim_config(3, speedup=10.0)
+    config = sim_config(3, speedup=10.0, takeoff="launch")
     rng = random.Random(4)
     async with running_sim(config) as sim:
         clients = [RawClient(e.gcs_port) for e in sim.endpoints]

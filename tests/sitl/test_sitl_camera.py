@@ -75,6 +75,7 @@ def _run(seed: int) -> tuple[list, tuple]:
         seed=seed,
         wind=WindConfig(east_m_s=3.0, gust_sigma_m_s=1.0),
         camera=CameraConfig(dropout_probability=0.2, outlier_probability=0.05),
+        takeoff="launch",
     )
     sim = SimulatorServer(config)
     for vehicle in sim.vehicles:  # launch them all (arm), no client needed

@@ -9,7 +9,7 @@ from tests.support.sitl_fixtures import RawClient, running_sim, sim_config, stre
 
 
 async def test_cut_link_goes_silent_triggers_the_failsafe_and_comes_back():
-    config = sim_config(2, speedup=5.0)
+    config = sim_config(2, speedup=5.0, takeoff="launch")
     async with running_sim(config) as sim:
         clients = [RawClient(e.gcs_port) for e in sim.endpoints]
         for client in clients:
@@ -68,7 +68,7 @@ async def test_cut_link_goes_silent_triggers_the_failsafe_and_comes_back():
 
 
 async def test_stopped_camera_sends_nothing_and_restarts():
-    config = sim_config(1, speedup=10.0)
+    config = sim_config(1, speedup=10.0, takeoff="launch")
     async with running_sim(config) as sim, RawClient(sim.endpoints[0].gcs_port) as client:
         await client.heartbeat()
         assert await client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, target_system=1) == 0
@@ -93,7 +93,7 @@ def test_a_failing_vehicle_step_is_logged_and_does_not_stop_the_others(caplog):
     from sitl.config import SimConfig, default_vehicles
     from sitl.server import SimulatorServer
 
-    sim = SimulatorServer(SimConfig(vehicles=default_vehicles(2)))
+    sim = SimulatorServer(SimConfig(vehicles=default_vehicles(2), takeoff="launch"))
     for vehicle in sim.vehicles:
         vehicle.arm(0.0)
 

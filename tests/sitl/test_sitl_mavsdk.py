@@ -32,7 +32,7 @@ async def _systems_by_id(mavsdk: Mavsdk, count: int) -> dict[int, object]:
 
 @pytest.mark.slow
 async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
-    config = sim_config(3, speedup=10.0)
+    config = sim_config(3, speedup=10.0, takeoff="launch")
     async with running_sim(config) as sim:
         gcs = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         async with Mavsdk(gcs) as mavsdk:
@@ -124,7 +124,7 @@ async def test_mavsdk_connects_arms_and_flies_offboard_courses_within_limits():
 
 
 async def test_mavsdk_reads_and_sets_the_px4_failsafe_parameters():
-    config = sim_config(1, speedup=10.0)
+    config = sim_config(1, speedup=10.0, takeoff="launch")
     async with running_sim(config) as sim:
         gcs = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         async with Mavsdk(gcs) as mavsdk:

@@ -37,7 +37,7 @@ async def _arm_and_start_offboard(client: RawClient, sysid: int) -> None:
 
 @pytest.mark.slow
 async def test_raw_pymavlink_client_connects_arms_and_flies_courses_within_limits():
-    config = sim_config(3, speedup=10.0)
+    config = sim_config(3, speedup=10.0, takeoff="launch")
     courses_deg = (90.0, -90.0, 180.0)
     async with running_sim(config) as sim, asyncio.TaskGroup() as group:
         clients = [RawClient(endpoint.gcs_port) for endpoint in sim.endpoints]
@@ -112,7 +112,7 @@ async def test_raw_pymavlink_client_connects_arms_and_flies_courses_within_limit
 
 @pytest.mark.slow
 async def test_failsafe_holds_within_1_5_s_and_loiters_on_the_radius():
-    config = sim_config(1, speedup=4.0)
+    config = sim_config(1, speedup=4.0, takeoff="launch")
     async with running_sim(config) as sim, RawClient(sim.endpoints[0].gcs_port) as client:
         await client.heartbeat()
         stop = asyncio.Event()
