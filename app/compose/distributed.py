@@ -14,7 +14,8 @@ once (still closing its logs).
 
 Mission time: the ground station announces the mission's epoch (``MissionEpoch``, retained on
 ``topics.MISSION_EPOCH``: the wall-clock time of mission time 0, once its simulator, if any, is
-up, and the clock rate); each agent waits for it before it opens its vehicle link, and maps its
+up, and the clock rate); each agent opens its vehicle link at once (frames carry the vehicle's
+boot time meanwhile), waits for the epoch before it arms the vehicle, and from then maps its
 vehicle's boot clock onto ``(wall time - epoch) * rate``. The processes therefore agree on mission
 time to the accuracy of their hosts' clock sync (NTP), however long ago the vehicles booted. The
 ground marks the epoch ``ended`` as it leaves, so an agent started for the next mission waits for
@@ -378,6 +379,27 @@ async def _end_epoch(bus: Bus, epoch: MissionEpoch) -> None:
         log.warning("ground could not mark its mission epoch ended: %s", exc)
 
 
+class DeferredMissionClock:
+    """A mission clock whose epoch comes later (the ground station's): None until ``set``."""
+
+    def __init__(self) -> None:
+        self.clock: MissionClock | None = None
+
+    def set(self, clock: MissionClock) -> None:
+        self.clock = clock
+
+    def __call__(self) -> float | None:
+        return self.clock.now_s() if self.clock is not None else None
+
+
+async def _next_frame(link: VehicleLink, timeout_s: float) -> None:
+    """Wait for the vehicle's next telemetry frame (a silent one fails in ``wait_ready``)."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(timeout_s):
+            async for _frame in link.telemetry():
+                return
+
+
 async def wait_for_epoch(
     subscription: Subscription, clock: Clock, timeout_s: float = EPOCH_TIMEOUT_S
 ) -> MissionClock:
@@ -648,17 +670,20 @@ class _Flight:
 
     async def fly(self, url: str, out_dir: Path, builtin: bool) -> None:
         plan, i = self._plan, self._vehicle
-        self._notify(f"agent {i}: waiting for the ground station's mission epoch")
-        mission_clock = await wait_for_epoch(self._epochs, self._clock)
-        self._events.emit(
-            "mission_epoch", 0.0, vehicle=i, epoch_s=mission_clock.epoch_s, rate=mission_clock.rate
-        )
         self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
+        mission_clock = DeferredMissionClock()
         async with AsyncExitStack() as stack:
             links = await stack.enter_async_context(
                 open_links(plan, [url], [i], builtin, mission_clock)
             )
             link = self._link = links[i]
+            self._notify(f"agent {i}: waiting for the ground station's mission epoch")
+            epoch = await wait_for_epoch(self._epochs, self._clock)
+            mission_clock.set(epoch)
+            await _next_frame(link, plan.config.link.connect_timeout_s)  # on the mission clock
+            self._events.emit(
+                "mission_epoch", epoch.now_s(), vehicle=i, epoch_s=epoch.epoch_s, rate=epoch.rate
+            )
             await prepare_vehicle(link, bring_up(plan, i), self._events)
             self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
             tlog = stack.enter_context(tlog_writer(out_dir, i, self._clock))

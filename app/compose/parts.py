@@ -87,7 +87,7 @@ async def open_links(
     urls: Sequence[str],
     vehicles: Sequence[int],
     builtin: bool,
-    mission_clock: Callable[[], float] | None = None,
+    mission_clock: Callable[[], float | None] | None = None,
 ) -> AsyncIterator[dict[int, VehicleLink]]:
     """One MAVSDK hub on ``urls`` and a link to each of ``vehicles`` (0-based: system id i+1),
     every vehicle's boot clock mapped onto ``mission_clock`` (``MissionClock``)."""

@@ -268,6 +268,30 @@ async def test_a_reboot_rebases_the_mapped_clock_and_mission_time_goes_on():
     assert event.t_s == pytest.approx(14.9)
 
 
+def test_frames_carry_boot_time_until_the_mission_epoch_is_known_then_mission_time():
+    epoch: list[float | None] = [None]
+    host = HostClock()
+
+    def deferred() -> float | None:
+        return None if epoch[0] is None else host.now_s - epoch[0]
+
+    vehicle = MavsdkVehicleLink(None, 4, ORIGIN, CONFIG, mission_clock=deferred)
+    before = vehicle._frame(position(500_000))  # booted 500 s ago, no epoch yet
+    assert before is not None
+    assert before.t_s == 500.0
+    vehicle._latest = before
+    host.now_s, epoch[0] = 1000.2, 1000.0  # the ground's epoch arrives: mission time 0.2 s
+    after = vehicle._frame(position(500_100))
+    assert after is not None  # not dropped as older than the boot-stamped frame
+    assert after.t_s == pytest.approx(0.2)
+    vehicle._latest = after
+    host.now_s = 1000.3
+    later = vehicle._frame(position(500_200))
+    assert later is not None
+    assert later.t_s == pytest.approx(0.3)
+    assert vehicle.counters.clock_rebases == 0
+
+
 def test_the_airspeed_of_vfr_hud_reaches_the_frames():
     vehicle = link()
     assert vehicle._frame(position(1_000)).airspeed_m_s is None  # type: ignore[union-attr]

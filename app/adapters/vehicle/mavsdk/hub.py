@@ -43,7 +43,7 @@ class MavsdkHub:
         *,
         clock: Callable[[], float] = time.monotonic,
         route_logs: bool = True,
-        mission_clock: Callable[[], float] | None = None,
+        mission_clock: Callable[[], float | None] | None = None,
     ) -> None:
         self._urls = [validate_url(url) for url in urls]
         if not self._urls:

@@ -153,7 +153,8 @@ class MavsdkVehicleLink:
     Built by ``MavsdkHub.link``; see ``app.runtime.ports.vehicle.VehicleLink`` for the contract.
     ``clock`` is the host's monotonic clock (link silence, frame age); ``mission_clock`` reads
     mission time on the host (``app.runtime.ports.clock.MissionClock``): given, every frame is
-    stamped with its boot time mapped onto it; None, with the vehicle's own boot time.
+    stamped with its boot time mapped onto it; None (or while it returns None: its epoch is not
+    known yet), with the vehicle's own boot time.
     """
 
     def __init__(
@@ -164,7 +165,7 @@ class MavsdkVehicleLink:
         config: LinkConfig,
         clock: Callable[[], float] = time.monotonic,
         gcs_system_id: int = MAVSDK_GCS_SYSTEM_ID,
-        mission_clock: Callable[[], float] | None = None,
+        mission_clock: Callable[[], float | None] | None = None,
     ) -> None:
         self._system = system
         self._mission_clock = mission_clock
@@ -463,18 +464,23 @@ class MavsdkVehicleLink:
         """A GLOBAL_POSITION_INT as the next frame; None for a late or repeated one (counted).
 
         With a mission clock its time is the boot time mapped onto it (a reboot re-bases the
-        offset: an event, and mission time goes on). Without, time going back by
-        ``clock_reset_s`` or more is a reboot: an event, and a new start."""
+        offset: an event, and mission time goes on); while that clock has no epoch yet (it
+        returns None) and without one, the boot time, and time going back by ``clock_reset_s``
+        or more is a reboot: an event, and a new start."""
         t_s = telemetry.time_boot_s(f)
-        if self._mission_clock is not None:
-            t_s, rebase = self._boot_clock.update(t_s, self._mission_clock())
-            if rebase is not None and rebase.reason != "first":
-                self._rebased(rebase, t_s)
+        host_t = self._mission_clock() if self._mission_clock is not None else None
         previous = self._latest
-        if previous is not None and t_s <= previous.t_s and self._mission_clock is not None:
-            self.counters.stale_frames += 1
-            return None
-        if previous is not None and t_s <= previous.t_s:
+        if host_t is not None:
+            t_s, rebase = self._boot_clock.update(t_s, host_t)
+            if rebase is not None:
+                if previous is not None:  # a new base: nothing before it to be late against
+                    self._previous = None
+                if rebase.reason != "first":
+                    self._rebased(rebase, t_s)
+            elif previous is not None and t_s <= previous.t_s:
+                self.counters.stale_frames += 1
+                return None
+        elif previous is not None and t_s <= previous.t_s:
             if previous.t_s - t_s < self._config.clock_reset_s:
                 self.counters.stale_frames += 1
                 return None
