@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import pytest
 
 from app.adapters.bus import InProcessBroker, InProcessBus
+from app.compose.mission import parse_operator_line, relay_operator
 from app.compose.parts import bring_up, vehicle_agent
 from app.config import load_config
 from app.config.mission import MissionConfig
@@ -257,3 +258,46 @@ async def test_the_phase_actuator_is_resolved_against_what_the_autopilot_honours
     assert event["actuator"] == actuator
     assert event["honours_speed"] is honours_speed
     assert event["configured"] == configured
+
+
+@pytest.mark.parametrize(
+    ("line", "command", "vehicles"),
+    [("resume 1\n", "resume", (1,)), ("  RESUME  ", "resume", None), ("hold 0 2", "hold", (0, 2))],
+)
+def test_an_operators_line_is_a_bus_command(
+    line: str, command: str, vehicles: tuple[int, ...] | None
+) -> None:
+    parsed = parse_operator_line(line, 3)
+    assert parsed is not None
+    assert (parsed.command, parsed.vehicles) == (command, vehicles)
+
+
+@pytest.mark.parametrize(
+    ("line", "why"),
+    [("takeoff", "unknown command 'takeoff'"), ("resume 3", "0..2"), ("resume x", "numbers")],
+)
+def test_a_bad_operator_line_is_refused_with_the_reason(line: str, why: str) -> None:
+    assert parse_operator_line("   \n", 3) is None
+    with pytest.raises(ValueError, match=why):
+        parse_operator_line(line, 3)
+
+
+async def test_typed_lines_reach_the_agents_as_commands_and_bad_ones_are_skipped() -> None:
+    broker = InProcessBroker()
+
+    async def typed() -> AsyncIterator[str]:
+        for line in ("resume 7\n", "resume 1\n"):
+            yield line
+
+    events = Events()
+    async with (
+        InProcessBus(broker, client_id="operator") as operator,
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        agent_bus.subscribe(topics.ALL_COMMANDS) as commands,
+    ):
+        await relay_operator(typed(), operator, events, 3, lambda: 42.0)
+        async with asyncio.timeout(WAIT_S):
+            _topic, message = await anext(aiter(commands))
+    assert isinstance(message, bus.Command)
+    assert (message.command, message.vehicles, message.t_s) == ("resume", (1,), 42.0)
+    assert events.of("operator_command") == [{"command": "resume", "vehicles": (1,)}]
