@@ -23,7 +23,7 @@ import json
 import math
 import os
 import random
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -132,13 +132,35 @@ async def run_hooks(hooks: Sequence[tuple[float, Hook]], ctx: MissionContext) ->
         await asyncio.sleep(0.02)
 
 
+class OperatorLines:
+    """What an operator types at ``standoff fly``, put by a hook."""
+
+    def __init__(self) -> None:
+        self._lines: asyncio.Queue[str] = asyncio.Queue()
+
+    def put(self, line: str) -> None:
+        self._lines.put_nowait(line)
+
+    async def lines(self) -> AsyncIterator[str]:
+        while True:
+            yield await self._lines.get()
+
+
 async def fly(
-    out_dir: Path, hooks: Sequence[tuple[float, Hook]], config: MissionConfig
+    out_dir: Path,
+    hooks: Sequence[tuple[float, Hook]],
+    config: MissionConfig,
+    operator: OperatorLines | None = None,
 ) -> MissionResult:
     plan = build_plan(config)
     sim_config_ = sim_config(plan, find_free_udp_base_port(plan.count))
     async with asyncio.timeout(WALL_TIMEOUT_S), SimulatorServer(sim_config_) as sim:
-        mission = Mission(plan, out_dir, simulator=sim)
+        mission = Mission(
+            plan,
+            out_dir,
+            simulator=sim,
+            operator=operator.lines() if operator is not None else None,
+        )
         async with asyncio.TaskGroup() as tg:
             schedule = tg.create_task(run_hooks(hooks, MissionContext(plan, sim, mission)))
             result = await mission.run()
@@ -365,6 +387,8 @@ class FaultRun:
 async def fault_run(tmp_path_factory: pytest.TempPathFactory) -> FaultRun:
     probe = Probe()
     revived: list[float] = []
+    resumed: list[float] = []
+    operator = OperatorLines()
 
     def kill(ctx: MissionContext) -> None:
         assert ctx.sim is not None
@@ -379,6 +403,13 @@ async def fault_run(tmp_path_factory: pytest.TempPathFactory) -> FaultRun:
             ctx.sim.set_link(KILLED, True)
             revived.append(t)
 
+    def resume_when_left_alone(ctx: MissionContext) -> None:
+        # back on the radio, it is in its failsafe's hold and its agent leaves it there: the
+        # operator types 'resume 2'
+        if revived and not resumed and ctx.agents[KILLED].pilot_has_control:
+            operator.put(f"resume {KILLED}\n")
+            resumed.append(ctx.ground.state.mission_t_s)
+
     def blind(ctx: MissionContext) -> None:
         assert ctx.sim is not None
         for i in range(len(ctx.sim.vehicles)):
@@ -390,8 +421,9 @@ async def fault_run(tmp_path_factory: pytest.TempPathFactory) -> FaultRun:
     )
     hooks = [*killer.hooks(probe), *blinder.hooks(probe), *probe.hooks(FAULT_RUN_END_S)]
     hooks += [(FAULT_FROM_S + RESPACE_S + 0.5 * k, revive_when_due) for k in range(80)]
+    hooks += [(FAULT_FROM_S + RESPACE_S + 0.25 * k, resume_when_left_alone) for k in range(200)]
     config = short_config(FAULT_RUN_END_S, FAULT_RUN_LEG_NORTH_M)
-    result = await fly(tmp_path_factory.mktemp("faults"), hooks, config)
+    result = await fly(tmp_path_factory.mktemp("faults"), hooks, config, operator)
     assert killer.at_s is not None, "the team never formed in track: no vehicle was killed"
     assert revived, "the killed vehicle was never revived"
     assert blinder.at_s is not None, "the team never formed again: no camera was stopped"
@@ -413,15 +445,14 @@ async def test_full_mission_runs_to_its_end(full_run: FullRun) -> None:
     assert "vehicle_left" not in summary["events"]
     assert all(c["link_losses"] == 0 for c in summary["links"].values())
     # a vehicle that fell out of offboard (its failsafe, when a loaded machine stalls the loop
-    # for more than a second of simulated time) was taken back at once by its agent
+    # for more than a second of simulated time) was left in its failsafe's mode and reported:
+    # the agent takes a vehicle back only on 'resume'
     log = events(full_run.result.out_dir)
     for left in (e for e in log if e["kind"] == "LeftOffboard"):
         assert any(
-            e["kind"] == "offboard_restart"
-            and e["vehicle"] == left["vehicle"]
-            and left["t_s"] <= e["t_s"] <= left["t_s"] + 3.0
-            for e in log
+            e["kind"] == "pilot_took_over" and e["vehicle"] == left["vehicle"] for e in log
         ), left
+    assert not any(e["kind"] == "resumed" for e in log)
 
 
 async def test_full_mission_writes_every_file_of_the_run_folder(full_run: FullRun) -> None:
@@ -595,10 +626,17 @@ async def test_a_killed_vehicle_rejoins_when_its_link_returns(fault_run: FaultRu
     revive_at = fault_run.revived_at_s
     joined = [e for e in log if e["kind"] == "vehicle_joined" and e["t_s"] > fault_run.killed_at_s]
     assert [e["detail"] for e in joined] == [f"vehicle {KILLED} is in the formation"]
-    assert revive_at <= joined[0]["t_s"] <= revive_at + 3.0
+    assert revive_at <= joined[0]["t_s"] <= revive_at + 5.0
     assert any(e["kind"] == "link_restored" and e["vehicle"] == KILLED for e in log)
-    # it had fallen back to hold: its agent took it back into offboard
-    assert any(e["kind"] == "offboard_restart" and e["vehicle"] == KILLED for e in log)
+    # it had fallen back to hold: its agent left it there, reported it, and took it back into
+    # offboard only on the operator's 'resume'
+    [took] = [e for e in log if e["kind"] == "pilot_took_over" and e["vehicle"] == KILLED]
+    [typed] = [e for e in log if e["kind"] == "operator_command"]
+    [resumed] = [e for e in log if e["kind"] == "resumed" and e["vehicle"] == KILLED]
+    assert took["flight_mode"] not in ("OFFBOARD", "")
+    assert typed["command"] == "resume"
+    assert list(typed["vehicles"]) == [KILLED]
+    assert took["t_s"] <= resumed["t_s"] <= joined[0]["t_s"]
     # to just before the end-of-mission hold (the cameras stopped meanwhile)
     back = fault_run.probe.between(joined[0]["t_s"] + 3.0, FAULT_RUN_END_S - 0.5)
     assert back
