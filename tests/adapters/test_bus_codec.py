@@ -19,6 +19,7 @@ from app.runtime.ports.messages import (
     LinkState,
     LocalEstimate,
     Message,
+    MissionEpoch,
     MissionState,
     TargetObservation,
     VehicleStatus,
@@ -75,7 +76,12 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Message]] = {
         sender=names, t_s=finite, vehicle=vehicles, east_m=finite, north_m=finite, alt_m=finite,
         course_rad=finite, speed_m_s=st.floats(min_value=0.0, max_value=1e3), phase_rad=finite,
         stage=stages, link=st.sampled_from(["ok", "degraded", "lost"]), healthy=st.booleans(),
-        detail=st.text(max_size=50),
+        detail=st.text(max_size=50), control=st.sampled_from(["mission", "pilot", "hold"]),
+        flight_mode=st.text(max_size=40),
+    ),
+    MissionEpoch: st.builds(
+        MissionEpoch, sender=names, t_s=finite, epoch_s=finite,
+        rate=st.floats(min_value=1e-3, max_value=1e3), ended=st.booleans(),
     ),
     LinkState: st.builds(
         LinkState, sender=names, t_s=finite, online=st.booleans(),
