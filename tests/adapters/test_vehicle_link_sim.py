@@ -268,7 +268,8 @@ async def test_a_mode_change_by_someone_else_is_reported_as_leaving_offboard():
 
 
 async def test_a_refused_mode_change_is_a_link_error_with_the_result():
-    config = sim_config(1, speedup=SPEEDUP)
+    # launched on arming: the PX4-like simulator would refuse ArduPlane's TAKEOFF mode too
+    config = sim_config(1, speedup=SPEEDUP, takeoff="launch")
     # the simulator is PX4-like: it refuses ArduPlane's GUIDED (custom mode 15); it has no
     # ArduPlane failsafe or airspeed parameters either, which the adapter would refuse it for
     arduplane = LinkConfig(
@@ -306,7 +307,8 @@ async def test_camera_observations_arrive_in_the_mission_frame():
             aclosing(link.observations()) as observations,
         ):
             await link.wait_ready(10.0)
-            await link.arm()  # the camera reports only in the air
+            await link.arm()
+            await link.take_off(20.0)  # the camera reports only in the air
             received = []
             async with asyncio.timeout(20.0):
                 async for observation in observations:
