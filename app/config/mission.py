@@ -38,13 +38,17 @@ class MissionGuidanceConfig(GuidanceConfig):
     vehicle; ``hold_s``: how long a command acts (the control period, 0.1 s at 10 Hz telemetry).
     Each agent steers on where its vehicle and the target will be in the middle of the hold
     (both 0: the paper's loop). The default latency, 0.01 s, is what setpoints to the built-in
-    simulator were measured to take (docs/guidance.md); set it for a slower link."""
+    simulator were measured to take (docs/guidance.md); set it for a slower link.
+    ``course_loop_identification``: identify each vehicle's course loop (gain k, delay) in
+    flight and fly it (``fly``), only report it in the event log (``report``), or assume the
+    envelope's k (``off``); ``app.core.guidance.course_id``."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
     latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
+    course_loop_identification: Literal["fly", "report", "off"] = "fly"
 
 
 class MissionPhaseConfig(PhaseConfig):

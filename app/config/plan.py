@@ -13,6 +13,7 @@ from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
 from app.core.agent import ActuatorChoice, AgentParams, GuidanceParams, PhaseParams
+from app.core.guidance import course_id
 from app.core.mission.agent import MissionAgentParams
 from app.core.mission.ground import GroundParams
 from app.core.mission.stage import StageParams
@@ -93,6 +94,12 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 latency_s=g.latency_s,
                 hold_s=g.hold_s,
                 moving_speed_m_s=config.stages.moving_speed_m_s,
+                course_id=(
+                    None
+                    if g.course_loop_identification == "off"
+                    else course_id.params_for(envelope)
+                ),
+                fly_identified=g.course_loop_identification == "fly",
             )
             for i in range(n)
         )
