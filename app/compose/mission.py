@@ -224,12 +224,15 @@ class Mission:
         return self.mission_clock.now_s() if self.mission_clock is not None else 0.0
 
     def _start_clock(self) -> MissionClock:
-        """Mission time 0: the given simulator's time 0, else now (the vehicles are there)."""
-        rate = clock_rate(self.plan, self.builtin)
-        host = self._clock.monotonic_s
-        if self._simulator is not None:
-            return MissionClock(host() - self._simulator.time_s / rate, rate, host)
-        return MissionClock.starting_now(rate, host)
+        """Mission time: a simulator in this process gives its own time (exact, and it stays
+        the simulator's when a loaded machine slows it); else the host's monotonic clock times
+        the clock rate from now (when the vehicles are there)."""
+        simulator = self._simulator
+        if simulator is not None:
+            return MissionClock(0.0, 1.0, lambda: simulator.time_s)
+        return MissionClock.starting_now(
+            clock_rate(self.plan, self.builtin), self._clock.monotonic_s
+        )
 
 
 def parse_operator_line(line: str, vehicles: int) -> Command | None:
