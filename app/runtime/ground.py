@@ -98,6 +98,13 @@ class GroundRuntimeParams:
     mission_period_s: float = 0.5
 
 
+def _link_label(link_ok: bool, piloted: bool) -> str:
+    """The live view's link column: a vehicle its pilot flies is heard, not lost."""
+    if not link_ok:
+        return "lost"
+    return "pilot" if piloted else "ok"
+
+
 class GroundStation:
     """Runs until mission time reaches ``end_t_s`` (then ``run`` returns) or it is cancelled."""
 
@@ -247,7 +254,7 @@ class GroundStation:
                 dist.get(v.vehicle, math.nan),
                 math.degrees(spacing.get(v.vehicle, math.nan)),
                 v.speed_m_s,
-                "ok" if reports[v.vehicle].link_ok else "lost",
+                _link_label(reports[v.vehicle].link_ok, v.vehicle in self._piloted),
                 v.active,
             )
             for v in sample.vehicles
