@@ -133,7 +133,7 @@ async def prepare_vehicle(link: VehicleLink, bring_up: BringUp, events: EventSin
             "mission config to where the vehicles are"
         )
     await link.arm()
-    await link.take_off(bring_up.take_off_timeout_s)
+    await link.take_off(bring_up.take_off_timeout_s, bring_up.altitude_m)
     latest = await wait_for_handover(link, bring_up, events)
     first = CourseSpeedCommand(latest.course_rad, bring_up.cruise_speed_m_s, bring_up.altitude_m)
     await link.start_offboard(first)

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from mavsdk.plugins.param import ParamResult
+from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
 from app.adapters.vehicle.autopilots.base import VehicleState
@@ -503,3 +504,22 @@ def test_envelope_used_is_the_vehicles():
         vehicle_id=5, commands=CommandRecorder(), params=ParamRecorder({}), limits=slow
     )
     assert adapter.heading_command(0.0, 15.0).fields_json.count('"param3": 1.5') == 1
+
+
+async def test_px4_take_off_names_the_altitude_so_mis_takeoff_alt_is_not_flown():
+    adapter, _, commands, params = px4()
+    await adapter.take_off(47.3977, 8.5456, 488.0 + 135.0)
+    [(name, system, component, fields)] = commands.sent
+    assert (name, system, component) == ("COMMAND_LONG", 3, 1)
+    assert fields["command"] == mavlink.MAV_CMD_NAV_TAKEOFF
+    # param7 is the AMSL altitude PX4's navigator climbs to; param5/6 the take-off point
+    assert fields["param7"] == pytest.approx(623.0)
+    assert (fields["param5"], fields["param6"]) == pytest.approx((47.3977, 8.5456))
+    assert params.sets == []
+
+
+async def test_px4_take_off_refused_is_a_link_error():
+    adapter, _, commands, _ = px4()
+    commands.result = mavlink.MAV_RESULT_DENIED
+    with pytest.raises(LinkError, match="NAV_TAKEOFF"):
+        await adapter.take_off(47.3977, 8.5456, 600.0)

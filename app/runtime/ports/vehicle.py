@@ -261,8 +261,10 @@ class VehicleLink(Protocol):
         """Arm; does nothing if already armed."""
         ...
 
-    async def take_off(self, timeout_s: float) -> None:
-        """Take off if on the ground and wait until in the air; nothing if already flying."""
+    async def take_off(self, timeout_s: float, altitude_m: float | None = None) -> None:
+        """Take off if on the ground and wait until in the air; nothing if already flying.
+        ``altitude_m``: the height over home to climb to where the autopilot's take-off takes
+        one (PX4's NAV_TAKEOFF); None leaves the vehicle's own take-off altitude."""
         ...
 
     async def start_offboard(self, first: CourseSpeedCommand) -> None:

@@ -278,6 +278,28 @@ class Px4FixedWingAdapter(OffboardControl):
         check_finite({"a_north": north, "a_east": east}, "acceleration setpoint")
         return AccelerationNed(north_m_s2=north, east_m_s2=east, down_m_s2=0.0)
 
+    def take_off_command(
+        self, lat_deg: float, lon_deg: float, altitude_amsl_m: float
+    ) -> MavlinkMessage:
+        """MAV_CMD_NAV_TAKEOFF to ``altitude_amsl_m`` (param7, AMSL) from here (param5/6).
+        PX4 v1.16's navigator (navigator_main.cpp, VEHICLE_CMD_NAV_TAKEOFF) takes param7 as the
+        take-off altitude in place of MIS_TAKEOFF_ALT, finite param5/6 as the take-off point,
+        and ignores param4 (the yaw is left to the flight task)."""
+        return command_long(
+            self.vehicle_id,
+            self.target_component,
+            mavlink.MAV_CMD_NAV_TAKEOFF,
+            (0.0, 0.0, 0.0, 0.0, lat_deg, lon_deg, altitude_amsl_m),
+        )
+
+    async def take_off(self, lat_deg: float, lon_deg: float, altitude_amsl_m: float) -> None:
+        await send_checked_command(
+            self.commands,
+            self.take_off_command(lat_deg, lon_deg, altitude_amsl_m),
+            self.vehicle_id,
+            "NAV_TAKEOFF",
+        )
+
     def speed_command(self, speed_m_s: float) -> MavlinkMessage:
         """MAV_CMD_DO_CHANGE_SPEED: param1 airspeed (0), param2 speed, param3 -1 (throttle kept)."""
         return command_long(

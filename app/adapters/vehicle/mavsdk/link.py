@@ -628,7 +628,7 @@ class MavsdkVehicleLink:
         latest = self._latest
         return self._in_air or (latest is not None and latest.in_air)
 
-    async def take_off(self, timeout_s: float) -> None:
+    async def take_off(self, timeout_s: float, altitude_m: float | None = None) -> None:
         adapter = self._require_adapter()
         # decide on a frame newer than the call: arming may just have launched the vehicle
         before = self._latest
@@ -640,9 +640,18 @@ class MavsdkVehicleLink:
             )
         if self._airborne():
             return
+        latest = self._latest
         if isinstance(adapter, ArduPlaneAdapter):
             # MAVSDK's takeoff sends NAV_TAKEOFF, which ArduPlane refuses unless a QuadPlane
             await adapter.take_off()
+        elif isinstance(adapter, Px4FixedWingAdapter) and altitude_m is not None and latest:
+            # PX4 climbs to MIS_TAKEOFF_ALT (the SIH airplane: about 20 m) unless NAV_TAKEOFF
+            # names an altitude: the vehicle's own altitude (its place in the stack), so the
+            # hand-over height is reached without a parameter write
+            home_amsl = latest.altitude_m - latest.relative_altitude_m
+            await adapter.take_off(
+                latest.latitude_deg, latest.longitude_deg, home_amsl + altitude_m
+            )
         else:
             try:
                 await self._action.takeoff()
