@@ -37,7 +37,6 @@ from typing import Any
 
 from app.adapters.bus import Backoff, Birth, BrokerUrl, Bus, MqttBus, Subscription, Will, open_bus
 from app.adapters.eventlog import EventLog
-from app.adapters.tlog import record_tlog
 from app.compose.parts import (
     MissionResult,
     bring_up,
@@ -45,7 +44,7 @@ from app.compose.parts import (
     counters_of,
     ground_station,
     open_links,
-    tlog_writer,
+    recording_tlogs,
     vehicle_agent,
     write_outputs,
 )
@@ -394,10 +393,11 @@ class DeferredMissionClock:
 
 async def _next_frame(link: VehicleLink, timeout_s: float) -> None:
     """Wait for the vehicle's next telemetry frame (a silent one fails in ``wait_ready``)."""
-    with contextlib.suppress(TimeoutError):
-        async with asyncio.timeout(timeout_s):
-            async for _frame in link.telemetry():
-                return
+    async with contextlib.aclosing(link.telemetry()) as frames:  # released: no queue left
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout_s):
+                async for _frame in frames:
+                    return
 
 
 async def wait_for_epoch(
@@ -677,6 +677,7 @@ class _Flight:
                 open_links(plan, [url], [i], builtin, mission_clock)
             )
             link = self._link = links[i]
+            await stack.enter_async_context(recording_tlogs(links, out_dir, self._clock))
             self._notify(f"agent {i}: waiting for the ground station's mission epoch")
             epoch = await wait_for_epoch(self._epochs, self._clock)
             mission_clock.set(epoch)
@@ -686,8 +687,5 @@ class _Flight:
             )
             await prepare_vehicle(link, bring_up(plan, i), self._events)
             self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
-            tlog = stack.enter_context(tlog_writer(out_dir, i, self._clock))
             self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin)
-            async with asyncio.TaskGroup() as tg:
-                tg.create_task(record_tlog(link, tlog), name=f"tlog-{i + 1}")
-                tg.create_task(self._agent.run(), name=self._agent.name)
+            await self._agent.run()

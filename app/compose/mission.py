@@ -20,7 +20,6 @@ from pathlib import Path
 
 from app.adapters.bus import BrokerUrl, InProcessBroker, Will, open_bus
 from app.adapters.eventlog import EventLog
-from app.adapters.tlog import record_tlog
 from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.compose.parts import (
     MissionResult,
@@ -28,7 +27,7 @@ from app.compose.parts import (
     clock_rate,
     ground_station,
     open_links,
-    tlog_writer,
+    recording_tlogs,
     vehicle_agent,
     write_outputs,
 )
@@ -156,6 +155,7 @@ class Mission:
         self.links = await stack.enter_async_context(
             open_links(plan, urls, range(plan.count), self.builtin, self.mission_clock)
         )
+        await stack.enter_async_context(recording_tlogs(self.links, self.out_dir, self._clock))
         async with asyncio.TaskGroup() as tg:
             for i, link in self.links.items():
                 tg.create_task(
@@ -186,17 +186,10 @@ class Mission:
             bus = await client(name, will)
             agents.append(vehicle_agent(plan, i, link, bus, events, self.builtin))
         self.agents = agents
-        tlogs = {
-            i: stack.enter_context(tlog_writer(self.out_dir, i, self._clock)) for i in self.links
-        }
         self.ground = ground
         try:
             async with asyncio.TaskGroup() as tg:
                 helpers = [tg.create_task(a.run(), name=a.name) for a in agents]
-                helpers += [
-                    tg.create_task(record_tlog(link, tlogs[i]), name=f"tlog-{i + 1}")
-                    for i, link in self.links.items()
-                ]
                 if self._operator is not None:
                     operator_bus = await client("operator")
                     helpers.append(

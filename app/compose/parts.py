@@ -1,7 +1,9 @@
 """The parts of a mission, built in one place for ``fly``, ``ground`` and ``agent`` alike: the
 vehicle links, the ground station, the agents, their logs, and the run folder at the end."""
 
+import asyncio
 import dataclasses
+import logging
 import math
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
@@ -10,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from app.adapters.eventlog import EventLog
-from app.adapters.tlog import TlogWriter
+from app.adapters.tlog import TlogWriter, record_tlog
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.config.plan import MissionPlan
@@ -31,6 +33,8 @@ from app.runtime.ports.events import EventSink
 from app.runtime.ports.vehicle import GeodeticOrigin, VehicleLink
 from app.runtime.ports.view import MissionSnapshot
 from app.runtime.vehicle import BringUp
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -165,6 +169,30 @@ def vehicle_agent(
 def tlog_writer(out_dir: Path, vehicle: int, clock: Clock) -> TlogWriter:
     """Vehicle ``vehicle``'s ``vehicle-{vehicle+1}.tlog``, stamped from now."""
     return TlogWriter(out_dir / f"vehicle-{vehicle + 1}.tlog", vehicle + 1, clock.time_s())
+
+
+@asynccontextmanager
+async def recording_tlogs(
+    links: Mapping[int, VehicleLink], out_dir: Path, clock: Clock
+) -> AsyncIterator[None]:
+    """Every link's telemetry into its ``vehicle-{i+1}.tlog`` for the block (opened as the
+    links are, so that the take-off and the climb to the hand-over are in the flight log)."""
+    async with AsyncExitStack() as stack:
+        writers = {i: stack.enter_context(tlog_writer(out_dir, i, clock)) for i in links}
+        tasks = [
+            asyncio.create_task(record_tlog(link, writers[i]), name=f"tlog-{i + 1}")
+            for i, link in links.items()
+        ]
+        try:
+            yield
+        finally:
+            for task in tasks:
+                task.cancel()
+            for task, outcome in zip(
+                tasks, await asyncio.gather(*tasks, return_exceptions=True), strict=True
+            ):
+                if isinstance(outcome, Exception):
+                    _log.error("%s stopped early: %s", task.get_name(), outcome)
 
 
 def counters_of(thing: object) -> dict[str, Any] | None:

@@ -89,6 +89,7 @@ class AgentCounters:
     commands_refused: int = 0
     offboard_restarts: int = 0  # taken back on a ``resume`` after the pilot took over
     pilot_takeovers: int = 0  # times someone else changed the vehicle's mode
+    course_rate_ff_held: int = 0  # wanted course rates beyond the airframe's, held to it
     observations_used: int = 0
     observations_dropped: int = 0
     observations_merged: int = 0  # queued observations folded into another (merge_backlog)
@@ -229,12 +230,21 @@ class VehicleAgent:
                         out.command.course_rad,
                         out.command.speed_m_s,
                         self._runtime.altitude_m,
-                        course_rate_rad_s=out.command.course_rate_ff_rad_s,
+                        course_rate_rad_s=self._feed_forward(out.command.course_rate_ff_rad_s),
                     ),
                 )
             self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
             if out.status is not None:
                 await self._publish_status(out.status)
+
+    def _feed_forward(self, rate_rad_s: float) -> float:
+        """The wanted course's rate, held to what the airframe can turn (the field asks for
+        more now and then near the circle; the vehicle cannot fly it), counted."""
+        limit = self.params.agent.envelope.max_course_rate_rad_s
+        if abs(rate_rad_s) <= limit:
+            return rate_rad_s
+        self.counters.course_rate_ff_held += 1
+        return math.copysign(limit, rate_rad_s)
 
     def _frame_wait(self, frame: VehicleTelemetry) -> None:
         """Count how long (vehicle seconds) the frame steered on waited after it arrived, when
@@ -476,6 +486,8 @@ class VehicleAgent:
         if self.state.holding:  # a hold asked for meanwhile is over too
             self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
         self.counters.offboard_restarts += 1
+        # stamped like pilot_took_over: the vehicle's newest frame (the loop may lag behind it)
+        t = max(t, latest.t_s) if latest is not None else t
         self._events.emit("resumed", t, vehicle=self.params.vehicle, from_mode=mode)
 
     async def _link_events(self) -> None:

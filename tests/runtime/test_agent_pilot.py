@@ -148,6 +148,8 @@ async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude(
         # loitering at standby, the wanted course turns: its rate reaches the link
         rates = [c.course_rate_rad_s for c in link.commands]
         assert all(math.isfinite(r) for r in rates)
+        limit = plan.agents[i].agent.envelope.max_course_rate_rad_s
+        assert all(abs(r) <= limit for r in rates)  # never more than the airframe turns
         assert any(abs(r) > 0.01 for r in rates)
         # counter-clockwise seen from above: the course falls (clockwise positive)
         assert sum(r < 0.0 for r in rates) > 0.8 * len(rates)
@@ -168,7 +170,7 @@ class ClimbingLink(QueueLink):
         self.put(ground)
         return ground
 
-    async def take_off(self, timeout_s: float) -> None:
+    async def take_off(self, timeout_s: float, altitude_m: float | None = None) -> None:
         asyncio.get_running_loop().call_soon(lambda: asyncio.ensure_future(self._climb()))
 
     async def _climb(self) -> None:

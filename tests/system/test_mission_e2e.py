@@ -556,7 +556,9 @@ async def test_no_setpoint_was_non_finite_or_outside_the_limits(full_run: FullRu
     links = full_run.result.summary["links"]
     assert set(links) == {"0", "1", "2"}
     for counters in links.values():
-        assert counters["setpoints"] > 0.9 * counters["frames"] > 0
+        # a setpoint per frame from the hand-over on (the runway take-off and the climb to the
+        # hand-over height before it are about a tenth of this short mission's frames)
+        assert counters["setpoints"] > 0.8 * counters["frames"] > 0
         assert counters["setpoints_limited"] == 0, counters["limited_by"]
     received = full_run.recorder.received
     sent = sum(c["setpoints"] for c in links.values())
