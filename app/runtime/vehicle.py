@@ -64,14 +64,19 @@ async def wait_for_handover(
         ready = latest
     else:
         ready = None
+        # closed when done: a subscription left behind after the hand-over would fill up at
+        # the vehicle's rate (50 Hz on PX4) for the rest of the mission
+        frames = link.telemetry()
         try:
             async with asyncio.timeout(bring_up.handover_timeout_s):
-                async for frame in link.telemetry():
+                async for frame in frames:
                     if _ready_for_handover(frame, bring_up):
                         ready = frame
                         break
         except TimeoutError:
             pass
+        finally:
+            await frames.aclose()
     if ready is None:
         last = link.latest
         missing = []

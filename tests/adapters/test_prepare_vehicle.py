@@ -1,5 +1,6 @@
 """``prepare_vehicle``: the steps before a vehicle flies the mission, on a fake link."""
 
+import asyncio
 from dataclasses import replace
 
 import pytest
@@ -50,7 +51,7 @@ class FakeLink:
     async def arm(self) -> None:
         self.steps.append("arm")
 
-    async def take_off(self, timeout_s: float) -> None:
+    async def take_off(self, timeout_s: float, altitude_m: float | None = None) -> None:
         self.steps.append("take-off")
         # climbed out: above the hand-over height, at flying speed
         self.latest = replace(
@@ -84,3 +85,33 @@ async def test_a_vehicle_far_from_the_mission_origin_is_refused_before_it_is_arm
     with pytest.raises(LinkError, match=r"vehicle 2 is 3312 km from the mission's origin"):
         await prepare_vehicle(link, bring_up(plan, 1), Events())  # type: ignore[arg-type]
     assert link.steps == ["ready"]
+
+
+async def test_the_hand_over_releases_its_telemetry_subscription() -> None:
+    """Frames published after the hand-over are queued for nobody: a reader left behind
+    would lose (drop) frames at the vehicle's rate for the rest of the mission."""
+    from app.adapters.vehicle.mavsdk.broadcast import Broadcast
+    from app.runtime.vehicle import wait_for_handover
+
+    plan_link = FakeLink(frame_at(10.0, 10.0))
+    stream: Broadcast[VehicleTelemetry] = Broadcast("vehicle 2 telemetry", queue_size=4)
+    plan_link.telemetry = stream.subscribe  # type: ignore[attr-defined]
+    climbing = replace(plan_link.frame, relative_altitude_m=5.0, ground_speed_m_s=9.0, in_air=True)
+    flying = replace(climbing, relative_altitude_m=60.0, ground_speed_m_s=16.0)
+
+    async def climb() -> None:
+        await asyncio.sleep(0.01)
+        stream.publish(climbing)
+        stream.publish(flying)
+
+    class Events:
+        def emit(self, kind: str, t_s: float, **fields: object) -> None: ...
+
+    plan = build_plan(load_config("test-short", MissionConfig))
+    task = asyncio.create_task(climb())
+    ready = await wait_for_handover(plan_link, bring_up(plan, 1), Events())  # type: ignore[arg-type]
+    await task
+    assert ready is flying
+    for _ in range(20):
+        stream.publish(flying)
+    assert stream.dropped == 0

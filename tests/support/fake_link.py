@@ -6,7 +6,7 @@ link's does, until ``start_offboard``)."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+from collections.abc import AsyncGenerator, AsyncIterator
 
 from app.runtime.ports.vehicle import (
     CourseSpeedCommand,
@@ -69,7 +69,7 @@ class QueueLink:
     async def hold(self) -> None:
         self.holds += 1
 
-    async def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
+    async def telemetry(self) -> AsyncGenerator[VehicleTelemetry, None]:
         while True:
             yield await self.frames.get()
 

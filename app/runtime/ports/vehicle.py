@@ -8,9 +8,9 @@ mapped by the link onto the mission clock, so that vehicles booted at different 
 from __future__ import annotations
 
 import math
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Protocol, TypeVar, runtime_checkable
 
 import pymap3d
 
@@ -217,6 +217,19 @@ class UnsupportedVehicleError(LinkError):
     """The vehicle takes none of the command forms this app can produce."""
 
 
+T_co = TypeVar("T_co", covariant=True)
+
+
+class FrameStream(Protocol[T_co]):
+    """An ``async for`` stream that its reader releases with ``aclose()`` when it stops early."""
+
+    def __aiter__(self) -> FrameStream[T_co]: ...
+
+    def __anext__(self) -> Awaitable[T_co]: ...
+
+    def aclose(self) -> Awaitable[None]: ...
+
+
 @runtime_checkable
 class VehicleLink(Protocol):
     """One vehicle, as the mission sees it. Implementations are async context managers.
@@ -279,8 +292,9 @@ class VehicleLink(Protocol):
         """Stop offboard control and put the vehicle in hold/loiter."""
         ...
 
-    def telemetry(self) -> AsyncIterator[VehicleTelemetry]:
-        """Every telemetry frame from this call on; ends when the link closes."""
+    def telemetry(self) -> FrameStream[VehicleTelemetry]:
+        """Every telemetry frame from this call on; ends when the link closes. A reader that
+        stops early calls ``aclose()`` (else the frames keep queueing for it)."""
         ...
 
     def observations(self) -> AsyncIterator[TargetObservation]:
