@@ -16,8 +16,10 @@ from app.adapters.live_view import LiveView
 from app.cli._options import add_mission_options, with_overrides
 from app.compose.mission import Mission
 from app.config import load_config
+from app.config.loading import validate_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
+from app.errors import ConfigError
 
 ORDER = 10
 
@@ -47,6 +49,13 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         metavar="URL",
         help="fly external vehicles (udpin://, udpout://, tcp://, serial://)",
     )
+    p.add_argument(
+        "--simulator",
+        action="store_true",
+        help="fly the built-in simulator even where the file lists vehicles to connect to: "
+        "the file's autopilot adapter against the simulator's matching personality (PX4 v1.16 "
+        "or ArduPlane 4.6), for a side-by-side with the real autopilots",
+    )
     p.add_argument("--speedup", type=float, help="built-in simulator speed-up factor")
     p.add_argument("--seed", type=int, help="built-in simulator's random seed")
     p.add_argument("--quiet", action="store_true", help="no live view")
@@ -58,6 +67,16 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
     p.set_defaults(handler=run)
 
 
+def on_the_simulator(config: MissionConfig) -> MissionConfig:
+    """The mission flown by the built-in simulator: no vehicles to connect to, and the
+    simulator's personality the one the file's autopilot adapter is written for."""
+    personality = "arduplane" if config.link.autopilot == "arduplane" else "px4"
+    raw = config.model_dump()
+    raw["link"]["connect"] = []
+    raw["sim"]["autopilot"] = personality
+    return validate_config(raw, MissionConfig, "--simulator")
+
+
 def default_out_dir(name: str) -> Path:
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{name}-{stamp}"
@@ -65,6 +84,10 @@ def default_out_dir(name: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     config = with_overrides(load_config(args.config, MissionConfig), args)
+    if args.simulator:
+        if args.connect:
+            raise ConfigError("--simulator and --connect exclude each other")
+        config = on_the_simulator(config)
     plan = build_plan(config)
     out = args.out or default_out_dir(config.name)
     console = Console()

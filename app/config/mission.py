@@ -142,8 +142,11 @@ class LinkSettings(StrictModel):
 
 
 class SimSettings(StrictModel):
-    """The built-in simulator when no ``connect`` URLs are given."""
+    """The built-in simulator when no ``connect`` URLs are given. ``autopilot``: the personality
+    its vehicles answer MAVLink with (``px4``: PX4 v1.16 fixed-wing; ``arduplane``: ArduPlane
+    4.6; docs/simulator.md)."""
 
+    autopilot: Literal["px4", "arduplane"] = "px4"
     speedup: Positive = 3.0
     seed: Annotated[int, Field(ge=0)] = 1
     base_port: Annotated[int, Field(ge=1024, le=65000)] = 14540

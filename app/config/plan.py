@@ -159,7 +159,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             limits=cfg.limits.build(),
             start=start,
             cruise_speed_m_s=cfg.limits.cruise_speed_m_s,
-            altitude_m=cfg.link.altitude_m + 10.0 * i,
+            altitude_m=cfg.link.vehicle_altitude_m(i),
         )
         for i, start in enumerate(team_starts(plan))
     )
@@ -173,6 +173,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             base_port=base_port,
             speedup=cfg.sim.speedup,
             seed=cfg.sim.seed,
+            autopilot=cfg.sim.autopilot,
             physics_dt_s=cfg.sim.physics_dt_s,
             telemetry_rate_hz=cfg.sim.telemetry_rate_hz,
             camera=cfg.sim.camera.build(),
