@@ -45,6 +45,7 @@ from app.runtime.ports.vehicle import (
     LinkLost,
     LinkRestored,
     OffboardLostError,
+    SetpointLimited,
     TargetObservation,
     VehicleLink,
     VehicleTelemetry,
@@ -516,6 +517,8 @@ class VehicleAgent:
                         previous_boot_s=event.previous_boot_s,
                         offset_s=round(event.offset_s, 3),
                     )
+                case SetpointLimited() if not _log_spaced(event.count):
+                    pass  # counted in the link's summary; the log gets the 1st, 2nd, 5th, 10th...
                 case _:
                     self._events.emit(
                         type(event).__name__,
@@ -523,3 +526,13 @@ class VehicleAgent:
                         vehicle=self.params.vehicle,
                         detail=repr(event),
                     )
+
+
+def _log_spaced(count: int) -> bool:
+    """1, 2, 5, 10, 20, 50, 100, ...: which of a repeating event's occurrences are logged (at
+    50 Hz a limiter that acts on every setpoint would write 14,000 lines a mission)."""
+    if count < 1:
+        return False
+    while count % 10 == 0:
+        count //= 10
+    return count in (1, 2, 5)
