@@ -223,7 +223,7 @@ T_co = TypeVar("T_co", covariant=True)
 class FrameStream(Protocol[T_co]):
     """An ``async for`` stream that its reader releases with ``aclose()`` when it stops early."""
 
-    def __aiter__(self) -> FrameStream[T_co]: ...
+    def __aiter__(self) -> AsyncIterator[T_co]: ...  # an async generator is one too
 
     def __anext__(self) -> Awaitable[T_co]: ...
 
