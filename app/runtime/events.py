@@ -8,7 +8,14 @@ from app.runtime.ports.events import EventSink
 log = logging.getLogger("standoff.events")
 
 
-WARNING_KINDS = frozenset({"falling_behind"})
+WARNING_KINDS = frozenset(
+    {
+        "falling_behind",
+        "pilot_took_over",
+        "handover_timeout",
+        "clock_rebased",
+    }
+)
 """Events logged as warnings (shown on the terminal) unless they say ``repeat=True``; the
 others are logged at INFO."""
 
