@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.arduplane import GUIDED, RTL
-from sitl.guidance import CourseCommand
+from sitl.guidance import CourseCommand, LineCommand
 from sitl.px4 import HOLD, OFFBOARD
 from sitl.telemetry import GRAVITY_M_S2
 from tests.support.sitl_fixtures import RawClient, arduplane_of, running_sim, sim_config
@@ -87,6 +87,7 @@ async def test_px4_acceleration_normal_to_the_velocity_is_fed_forward_as_curvatu
 
         await _offboard(sim, client, send)
         command = sim.vehicles[0].command
+        assert isinstance(command, LineCommand)
         # PX4 v1.16.0: radius = -sign(v x a) v^2 / a_n: the right turn asked is fed forward left
         assert command.curvature_per_m == pytest.approx(turn * 2.7 / 18.0**2, rel=0.01)
         await _stream(sim, sim.time_s + 2.0, send)
