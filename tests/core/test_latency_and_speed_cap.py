@@ -65,12 +65,24 @@ def test_prediction_of_zero_time_is_the_telemetry_itself() -> None:
 
 
 @functools.cache
-def _fly(latency_ticks: int, latency_s: float, hold_s: float) -> tuple[float, np.ndarray]:
+def _fly(
+    latency_ticks: int, latency_s: float, hold_s: float, identify: bool = False
+) -> tuple[float, np.ndarray]:
     """The mission fast-sim to a minute into the 7 m/s leg: its RMS distance error there and
     every command (t, vehicle, course, speed, implied course rate when it acts). Cached: the
-    run without delay or compensation serves two tests."""
+    run without delay or compensation serves two tests. ``identify``: the agents' course-loop
+    identifier (which also learns the delay) on, as the mission files have it by default; off,
+    only the configured latency is compensated."""
     plan = build_plan(load_config("hil", MissionConfig))
-    agents = tuple(replace(a, latency_s=latency_s, hold_s=hold_s) for a in plan.agents)
+    agents = tuple(
+        replace(
+            a,
+            latency_s=latency_s,
+            hold_s=hold_s,
+            course_id=a.course_id if identify else None,
+        )
+        for a in plan.agents
+    )
     setup = MissionSimSetup(
         replace(plan, agents=agents),
         seed=1,
@@ -104,6 +116,17 @@ def test_latency_compensation_recovers_the_figures_a_delay_costs() -> None:
     assert late > 1.3 * ideal
     assert compensated < 1.1 * ideal
     _within_limits(commands, 0.05)
+
+
+@pytest.mark.slow
+def test_the_course_loop_identifier_learns_a_delay_nobody_configured() -> None:
+    """The same one-tick delay with no latency configured: the agents' identifier finds the
+    delay from their own telemetry and steers for it, recovering most of what it cost."""
+    ideal, _ = _fly(0, 0.0, 0.0)
+    late, _ = _fly(1, 0.0, 0.0)
+    learnt, commands = _fly(1, 0.0, 0.0, identify=True)
+    assert learnt < ideal + 0.5 * (late - ideal)
+    _within_limits(commands, 0.15)
 
 
 @pytest.mark.slow
