@@ -597,9 +597,7 @@ async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(fault_run: 
     kill_at, revive_at = fault_run.killed_at_s, fault_run.revived_at_s
     log = events(fault_run.result.out_dir)
     left = [e for e in log if e["kind"] == "vehicle_left"]
-    assert {e["detail"] for e in left} == {f"vehicle {KILLED} left the formation"}
-    # (a second 'left' may follow the revival: see _readmitted_at_once)
-    assert all(e["t_s"] >= revive_at for e in left[1:]), left
+    assert [e["detail"] for e in left] == [f"vehicle {KILLED} left the formation"]
     lost_after_s = build_plan(short_config()).ground.lost_after_s
     assert kill_at < left[0]["t_s"] <= kill_at + lost_after_s + 1.0
     assert any(e["kind"] == "link_lost" and e["vehicle"] == KILLED for e in log)
@@ -625,24 +623,13 @@ async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(fault_run: 
     assert all(abs(distance_m(s, i)) < 10.0 for s in out if s.t_s >= settled[0][0] for i in (0, 1))
 
 
-def _readmitted_at_once(joined: list[dict[str, Any]], restored_t_s: float) -> None:
-    """Known wart (session 6 note): a vehicle whose link comes back is readmitted on its first
-    statuses, before its agent has seen (on the next 1 Hz HEARTBEAT) that its failsafe put it in
-    hold; it leaves again within about a second and rejoins on 'resume'. Such an early
-    readmission is allowed only that close to the link's return."""
-    for early in joined[:-1]:
-        assert restored_t_s <= early["t_s"] <= restored_t_s + 2.0, (early, restored_t_s)
-
-
 async def test_a_killed_vehicle_rejoins_when_its_link_returns(fault_run: FaultRun) -> None:
     log = events(fault_run.result.out_dir)
     revive_at = fault_run.revived_at_s
     joined = [e for e in log if e["kind"] == "vehicle_joined" and e["t_s"] > fault_run.killed_at_s]
-    assert {e["detail"] for e in joined} == {f"vehicle {KILLED} is in the formation"}
-    [restored] = [e for e in log if e["kind"] == "link_restored" and e["vehicle"] == KILLED]
-    _readmitted_at_once(joined, restored["t_s"])
-    joined = joined[-1:]
+    assert [e["detail"] for e in joined] == [f"vehicle {KILLED} is in the formation"]
     assert revive_at <= joined[0]["t_s"] <= revive_at + 5.0
+    assert any(e["kind"] == "link_restored" and e["vehicle"] == KILLED for e in log)
     # it had fallen back to hold: its agent left it there, reported it, and took it back into
     # offboard only on the operator's 'resume'
     [took] = [e for e in log if e["kind"] == "pilot_took_over" and e["vehicle"] == KILLED]

@@ -189,6 +189,8 @@ class MavsdkVehicleLink:
         self._latest: VehicleTelemetry | None = None
         self._last_rx: float | None = None
         self._link_ok = False
+        # after a link loss: whether a HEARTBEAT has come since (its mode is known again)
+        self._heard_since_loss = True
         self._mode = "UNKNOWN"
         self._armed = False
         self._in_air = False
@@ -435,6 +437,7 @@ class MavsdkVehicleLink:
                         self._mode,
                     )
                     self._events.publish(LeftOffboard(self._id, t_s, self._mode))
+                self._heard_since_loss = True
                 await self._notify()
 
     async def _read_global_position(self) -> None:
@@ -451,10 +454,16 @@ class MavsdkVehicleLink:
                     continue
                 self._last_rx = self._clock()
                 if not self._link_ok:
-                    if self._latest is not None:
-                        log.warning("vehicle %d: link restored at t=%.2f", self._id, frame.t_s)
-                        self._events.publish(LinkRestored(self._id, frame.t_s))
-                    self._link_ok = True
+                    if self._latest is not None and not self._heard_since_loss:
+                        # back, but in a mode unknown until its next HEARTBEAT (1 Hz on
+                        # ArduPilot): its failsafe may have taken it; restored only then, after
+                        # the mode change is reported, so it is not readmitted for a second
+                        frame = replace(frame, link_ok=False)
+                    else:
+                        if self._latest is not None:
+                            log.warning("vehicle %d: link restored at t=%.2f", self._id, frame.t_s)
+                            self._events.publish(LinkRestored(self._id, frame.t_s))
+                        self._link_ok = True
                 self._latest = frame
                 self.counters.frames += 1
                 self._telemetry.publish(frame)
@@ -588,6 +597,7 @@ class MavsdkVehicleLink:
             silent = self._clock() - last
             if silent > self._config.link_timeout_s:
                 self._link_ok = False
+                self._heard_since_loss = False
                 self.counters.link_losses += 1
                 latest = self._latest
                 t_s = latest.t_s if latest else 0.0
