@@ -281,3 +281,44 @@ def test_topic_layout() -> None:
     for bad in ("a/b", "+", "#", "", True):
         with pytest.raises(TopicError):
             topics.status(bad)
+
+
+# --- bounded before parsing, parsed once (issue #14) ----------------------------------------
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"[" * 5000 + b"]" * 5000,
+        b"{" * 5000,
+        b'{"v":2,"kind":"status","x":' + b"[" * 100_000 + b"]" * 100_000 + b"}",
+        b"[" * 9 + b"]" * 9,
+    ],
+)
+def test_a_nesting_bomb_is_malformed_not_a_recursion_error(payload: bytes) -> None:
+    with pytest.raises(MalformedMessage, match=r"nested more than 8 deep|bytes is over"):
+        decode(payload)
+
+
+def test_brackets_inside_strings_do_not_count_as_nesting() -> None:
+    status = OK.model_copy(update={"detail": '[[[[[[[[[[[[ {{{{{{{{{{ \\" [[[[[[[['})
+    assert decode(encode(status)) == status
+
+
+def test_the_deepest_message_passes_the_depth_bound() -> None:
+    eye = tuple(tuple(1.0 if i == j else 0.0 for j in range(6)) for i in range(6))
+    message = LocalEstimate(
+        sender="agent-0", t_s=1.0, vehicle=0, x=(0.0,) * 6, P=eye,
+        mu=(0.5, 0.5), model_x=((0.0,) * 6, (0.0,) * 6), model_P=(eye, eye),
+    )  # fmt: skip
+    assert decode(encode(message)) == message
+
+
+def test_a_wrong_version_is_told_apart_without_a_second_parse() -> None:
+    with pytest.raises(UnsupportedVersion, match="3"):
+        decode(_with(v=3))
+    with pytest.raises(UnsupportedVersion, match="3"):
+        decode(_with(v=3, kind="future-kind"))
+    with pytest.raises(MalformedMessage) as info:
+        decode(_with(kind="future-kind"))
+    assert not isinstance(info.value, UnsupportedVersion)
