@@ -7,6 +7,7 @@ from typing import Any
 
 from app.adapters.bus.base import (
     DEFAULT_QUEUE_SIZE,
+    DROP_REASONS,
     Birth,
     Bus,
     BusClosed,
@@ -16,10 +17,11 @@ from app.adapters.bus.base import (
 )
 from app.adapters.bus.codec import MalformedMessage, UnsupportedVersion, decode, encode
 from app.adapters.bus.inproc import InProcessBroker, InProcessBus
-from app.adapters.bus.mqtt import Backoff, BrokerUrl, BusUrlError, MqttBus
+from app.adapters.bus.mqtt import Backoff, BrokerUrl, BusUrlError, Login, MqttBus, tls_context
 
 __all__ = [
     "DEFAULT_QUEUE_SIZE",
+    "DROP_REASONS",
     "Backoff",
     "Birth",
     "BrokerUrl",
@@ -29,6 +31,7 @@ __all__ = [
     "BusUrlError",
     "InProcessBroker",
     "InProcessBus",
+    "Login",
     "MalformedMessage",
     "MqttBus",
     "Subscription",
@@ -37,6 +40,7 @@ __all__ = [
     "decode",
     "encode",
     "open_bus",
+    "tls_context",
 ]
 
 
@@ -48,11 +52,14 @@ def open_bus(
     birth: Birth | None = None,
     queue_size: int = DEFAULT_QUEUE_SIZE,
     broker: InProcessBroker | None = None,
+    identity: str | None = None,
     **mqtt_options: Any,
 ) -> Bus:
     """A bus client to enter with ``async with``: in-process when ``url`` is None, else MQTT.
 
     ``will`` is published for the client if it vanishes, ``birth`` each time it connects.
+    ``identity``: the client publishes only as this identity, on its topics (MQTT: default the
+    ``login``'s user name).
 
     ``broker`` shares one in-process broker between clients (in-process only); ``mqtt_options``
     are ``MqttBus`` keywords (qos, backoff, connect_timeout_s, op_timeout_s, tls_context, ...).
@@ -62,10 +69,21 @@ def open_bus(
         if mqtt_options:
             raise TypeError(f"options for MQTT given to the in-process bus: {sorted(mqtt_options)}")
         return InProcessBus(
-            broker, client_id=client_id, will=will, birth=birth, queue_size=queue_size
+            broker,
+            client_id=client_id,
+            will=will,
+            birth=birth,
+            queue_size=queue_size,
+            identity=identity,
         )
     if broker is not None:
         raise TypeError("an in-process broker was given with an MQTT URL")
     return MqttBus(
-        url, client_id=client_id, will=will, birth=birth, queue_size=queue_size, **mqtt_options
+        url,
+        client_id=client_id,
+        will=will,
+        birth=birth,
+        queue_size=queue_size,
+        identity=identity,
+        **mqtt_options,
     )

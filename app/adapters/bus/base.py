@@ -7,9 +7,15 @@
                 ...
 
 Every payload goes through the codec on both buses; a payload that does not decode is logged,
-counted in ``bus.stats`` and dropped, never raised into the consumer. Each subscription has a
-bounded queue; when a slow consumer lets it fill, the oldest message is dropped and counted
-(the freshest data is what a control loop wants).
+counted in ``bus.stats`` and dropped, never raised into the consumer. So is a well-formed
+message that its topic does not permit (``topics.refusal``: a sender, kind or vehicle other
+than the topic's): the identity rule lives in one place and both buses apply it here. Each drop
+is counted by reason in ``bus.drops`` and logged rate-limited (``DropLog``). Each subscription
+has a bounded queue; when a slow consumer lets it fill, the oldest message is dropped and
+counted (the freshest data is what a control loop wants).
+
+A bus given an ``identity`` (the client's login on an authenticating broker) also refuses to
+publish anything but its own messages on its own topics (``BusError``).
 """
 
 from __future__ import annotations
@@ -19,12 +25,13 @@ import asyncio
 import collections
 import dataclasses
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from types import TracebackType
 from typing import Self
 
 from app.adapters.bus import codec
 from app.errors import BusError
+from app.runtime.ports import topics
 from app.runtime.ports.messages import Message
 from app.runtime.ports.topics import Topic, TopicFilter, as_filter, as_topic
 
@@ -45,6 +52,45 @@ class BusStats:
     wrong_version: int = 0  # well-formed payloads of another schema version
     unsent: int = 0  # QoS 0 messages not sent because the broker was out of reach (MQTT)
     reconnects: int = 0  # connections after the first one (MQTT: the broker came back)
+    refused: int = 0  # well-formed messages their topic does not permit (``Bus.drops``: why)
+    denied: int = 0  # QoS 1/2 publishes of this client the broker refused (its ACL; MQTT 5)
+
+
+MALFORMED = "malformed"
+WRONG_VERSION = "wrong_version"
+DROP_REASONS = (MALFORMED, WRONG_VERSION, *topics.REFUSALS)
+"""Why a received payload is dropped before any consumer sees it (the keys of ``Bus.drops``)."""
+
+
+class DropLog:
+    """Logs dropped messages without letting a flood of them flood the log.
+
+    Each (reason, sender, topic) is logged at its 1st, 10th, 100th, ... drop, with the count;
+    at most ``max_keys`` such keys are remembered, the rest share one (a sender that varies its
+    name or topic cannot grow the table or the log). No clock: rate-limited by count.
+    """
+
+    def __init__(self, client_id: str, max_keys: int = 256) -> None:
+        self.client_id = client_id
+        self.max_keys = max_keys
+        self._seen: dict[tuple[str, str, str], int] = {}
+
+    def dropped(self, reason: str, sender: str, topic: str, detail: object) -> None:
+        key = (reason, sender, topic)
+        if key not in self._seen and len(self._seen) >= self.max_keys:
+            key = (reason, "*", "*")
+        count = self._seen.get(key, 0) + 1
+        self._seen[key] = count
+        if count == 10 ** (len(str(count)) - 1):  # 1, 10, 100, ...
+            log.warning(
+                "bus %s: dropped a message on %r from %r (%s, %d so far): %s",
+                self.client_id,
+                topic[:120],
+                sender[:64],
+                reason,
+                count,
+                str(detail)[:300],
+            )
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -155,18 +201,34 @@ class Subscription:
 class Bus(abc.ABC):
     """One client of a publish/subscribe bus with MQTT topic semantics; an async context manager."""
 
-    def __init__(self, *, client_id: str, queue_size: int = DEFAULT_QUEUE_SIZE) -> None:
+    def __init__(
+        self,
+        *,
+        client_id: str,
+        queue_size: int = DEFAULT_QUEUE_SIZE,
+        identity: str | None = None,
+    ) -> None:
         if queue_size < 1:
             raise ValueError(f"queue_size must be at least 1, got {queue_size}")
         self.client_id = client_id
+        self.identity = identity
         self._default_queue_size = queue_size
         self._subscriptions: dict[TopicFilter, list[Subscription]] = {}
         self._counts: collections.Counter[str] = collections.Counter()
+        self._drops: collections.Counter[str] = collections.Counter()
+        self._drop_log = DropLog(client_id)
         self._open = False
 
     @property
     def stats(self) -> BusStats:
         return BusStats(**{f.name: self._counts[f.name] for f in dataclasses.fields(BusStats)})
+
+    @property
+    def drops(self) -> Mapping[str, int]:
+        """Received payloads dropped before any consumer saw them, by reason (``DROP_REASONS``:
+        ``malformed``, ``wrong_version``, and the identity rule's ``wrong_sender``,
+        ``wrong_vehicle``, ``wrong_kind``, ``unknown_topic``); a copy, every reason present."""
+        return {reason: self._drops[reason] for reason in DROP_REASONS}
 
     @property
     def is_open(self) -> bool:
@@ -219,6 +281,8 @@ class Bus(abc.ABC):
         topic = as_topic(topic)
         if not self._open:
             raise BusClosed(f"bus {self.client_id!r} is not open; cannot publish on {topic}")
+        if self.identity is not None:
+            self._check_own(topic, message)
         sent = await self._send(topic, codec.encode(message), qos, retain)
         self._counts["published" if sent else "unsent"] += 1
 
@@ -232,6 +296,21 @@ class Bus(abc.ABC):
         """
         size = self._default_queue_size if queue_size is None else queue_size
         return Subscription(self, as_filter(topic_filter), size)
+
+    def _check_own(self, topic: Topic, message: Message) -> None:
+        """A client with an identity publishes only as itself, only on its own topics."""
+        identity, kind = self.identity, topics.kind_of(message)
+        if message.sender != identity:
+            raise BusError(
+                f"bus {self.client_id!r} is {identity!r}: it cannot publish a {kind}"
+                f" from {message.sender!r} (on {topic})"
+            )
+        reason = topics.refusal(topic, message)
+        if reason is not None:
+            raise BusError(
+                f"bus {self.client_id!r}: {identity!r} may not publish a {kind} on {topic}"
+                f" ({reason}); receivers would drop it"
+            )
 
     # shared machinery
     async def _attach(self, sub: Subscription) -> None:
@@ -279,12 +358,17 @@ class Bus(abc.ABC):
             topic = Topic(topic_name)
             message = codec.decode(payload)
         except codec.UnsupportedVersion as exc:
-            self._counts["wrong_version"] += 1
-            log.warning("bus %s: dropped a message on %s: %s", self.client_id, topic_name, exc)
+            self._drop(WRONG_VERSION, "?", topic_name, exc)
             return
         except (codec.MalformedMessage, BusError) as exc:
-            self._counts["malformed"] += 1
-            log.warning("bus %s: dropped a message on %r: %s", self.client_id, topic_name, exc)
+            self._drop(MALFORMED, "?", topic_name, exc)
+            return
+        reason = topics.refusal(topic, message)
+        if reason is not None:
+            self._counts["refused"] += 1
+            self._drop(
+                reason, message.sender, topic_name, f"a {topics.kind_of(message)} not believed"
+            )
             return
         for topic_filter in targets:
             for sub in self._subscriptions[topic_filter]:
@@ -292,6 +376,12 @@ class Bus(abc.ABC):
                 if not sub._offer(topic, message):
                     self._counts["dropped"] += 1
                     log.debug("bus %s: %r full, dropped its oldest", self.client_id, sub)
+
+    def _drop(self, reason: str, sender: str, topic_name: str, detail: object) -> None:
+        if reason in (MALFORMED, WRONG_VERSION):
+            self._counts[reason] += 1
+        self._drops[reason] += 1
+        self._drop_log.dropped(reason, sender, topic_name, detail)
 
     # transport
     @abc.abstractmethod

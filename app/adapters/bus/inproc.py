@@ -61,8 +61,11 @@ class InProcessBus(Bus):
         will: Will | None = None,
         birth: Birth | None = None,
         queue_size: int = DEFAULT_QUEUE_SIZE,
+        identity: str | None = None,
     ) -> None:
-        super().__init__(client_id=client_id or f"inproc-{next(_ids)}", queue_size=queue_size)
+        super().__init__(
+            client_id=client_id or f"inproc-{next(_ids)}", queue_size=queue_size, identity=identity
+        )
         self.broker = broker if broker is not None else InProcessBroker()
         self.will = will
         self.birth = birth

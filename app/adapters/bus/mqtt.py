@@ -9,6 +9,11 @@ aiomqtt is bounded with ``asyncio.timeout`` instead of its ``asyncio.wait_for`` 
 Received messages go from the socket straight into the subscriptions' bounded queues, every
 packet already in the socket at once (``CancelSafeClient``): a process that falls behind then
 drops its oldest messages there instead of reading every one, ever later.
+
+On a broker that authenticates, the client logs in as its identity (``Login``: user name and
+password, from a file or an environment variable; optionally a TLS client certificate,
+``tls_context``). A publish the broker refuses (its ACL; MQTT 5 tells a QoS 1/2 publisher so)
+is counted in ``stats.denied`` and logged.
 """
 
 from __future__ import annotations
@@ -18,17 +23,20 @@ import dataclasses
 import itertools
 import logging
 import math
+import os
 import secrets
 import select
 import ssl
 import urllib.parse
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator, Mapping
+from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import aiomqtt
 import paho.mqtt.client as paho
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
 
 from app.adapters.bus import codec
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, BusClosed, Will
@@ -110,6 +118,77 @@ def _redact(url: str) -> str:
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
+class Login:
+    """A client's credentials on a broker that authenticates: its user name (the client's
+    identity, e.g. ``ground`` or ``agent-1``) and password. Never shown in ``repr``."""
+
+    username: str
+    password: str | None = dataclasses.field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.username or any(c in self.username for c in "\x00/+#"):
+            raise BusUrlError(f"bad broker user name {self.username!r}")
+
+    @classmethod
+    def load(
+        cls,
+        username: str,
+        *,
+        password_file: Path | str | None = None,
+        password_env: str | None = None,
+        environ: Mapping[str, str] | None = None,
+    ) -> Login:
+        """The login of ``username`` with its password read from ``password_file`` (its first
+        line) or the environment variable ``password_env`` (not both); ``BusUrlError`` (a
+        ConfigError) naming the file or variable when it cannot be read or is empty."""
+        if password_file is not None and password_env is not None:
+            raise BusUrlError(
+                "give the broker password by a file or an environment variable, not both"
+            )
+        password: str | None = None
+        if password_file is not None:
+            try:
+                text = Path(password_file).read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                raise BusUrlError(
+                    f"cannot read the broker password file {password_file}: {exc}"
+                ) from exc
+            password = text.splitlines()[0] if text.strip() else ""
+            if not password:
+                raise BusUrlError(f"the broker password file {password_file} is empty")
+        elif password_env is not None:
+            password = (os.environ if environ is None else environ).get(password_env)
+            if not password:
+                raise BusUrlError(
+                    f"the environment variable {password_env} (broker password) is not set"
+                )
+        return cls(username, password)
+
+
+def tls_context(
+    ca_file: Path | str | None = None,
+    cert_file: Path | str | None = None,
+    key_file: Path | str | None = None,
+) -> ssl.SSLContext:
+    """A TLS context that trusts ``ca_file`` (default: the system's CAs) and, with
+    ``cert_file`` (and ``key_file``, unless the key is in the certificate file), shows the
+    broker this client certificate (mosquitto ``require_certificate``; with
+    ``use_identity_as_username`` its common name is then the login). ``BusUrlError`` on a file
+    that cannot be loaded."""
+    if key_file is not None and cert_file is None:
+        raise BusUrlError("a TLS client key was given without its certificate")
+    try:
+        context = ssl.create_default_context(cafile=None if ca_file is None else str(ca_file))
+        if cert_file is not None:
+            context.load_cert_chain(str(cert_file), None if key_file is None else str(key_file))
+    except (OSError, ssl.SSLError) as exc:
+        raise BusUrlError(
+            f"cannot load the TLS files ({ca_file}, {cert_file}, {key_file}): {exc}"
+        ) from exc
+    return context
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
 class Backoff:
     """Reconnect delays: ``initial_s``, times ``factor`` after each failure, at most ``max_s``."""
 
@@ -167,9 +246,30 @@ class CancelSafeClient(aiomqtt.Client):
     ``MqttError``, when the connection is lost.
     """
 
-    def __init__(self, *args: Any, deliver: Deliver | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        *args: Any,
+        deliver: Deliver | None = None,
+        on_denied: Callable[[ReasonCode], None] | None = None,
+        **kwargs: Any,
+    ) -> None:
         self._deliver = deliver
+        self._on_denied = on_denied
         super().__init__(*args, **kwargs)
+
+    def _on_publish(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        mid: int,
+        reason_code: ReasonCode,
+        properties: Properties,
+    ) -> None:
+        # aiomqtt ignores the reason code: a QoS 1/2 publish the broker refused (MQTT 5 PUBACK
+        # "not authorized", mosquitto's ACL) would look delivered
+        if self._on_denied is not None and getattr(reason_code, "is_failure", False):
+            self._on_denied(reason_code)
+        super()._on_publish(client, userdata, mid, reason_code, properties)
 
     def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
         if self._deliver is None:
@@ -268,7 +368,14 @@ class MqttBus(Bus):
         and counted in ``stats.unsent`` (a loop that publishes as it controls must not stall
         for an outage; QoS 0 promises at most once).
     tls_context
-        For ``mqtts://``: the SSL context (default: the system's trusted CAs).
+        For ``mqtts://``: the SSL context (default: the system's trusted CAs; ``tls_context()``
+        builds one with a CA file and a client certificate).
+    login
+        The user name and password to log in with (instead of the URL's; a URL naming another
+        user is refused). On a broker that authenticates, the login is the client's identity.
+    identity
+        The identity the client publishes as (default: the login's user name): the bus then
+        refuses to publish a message from anyone else or on a topic not its own.
     sleep
         The clock's sleep, used for the reconnect back-off (injectable for tests).
     """
@@ -287,12 +394,24 @@ class MqttBus(Bus):
         op_timeout_s: float = 5.0,
         keepalive_s: int = 10,
         tls_context: ssl.SSLContext | None = None,
+        login: Login | None = None,
+        identity: str | None = None,
         sleep: Sleep = asyncio.sleep,
     ) -> None:
         super().__init__(
-            client_id=client_id or f"standoff-{secrets.token_hex(4)}", queue_size=queue_size
+            client_id=client_id or f"standoff-{secrets.token_hex(4)}",
+            queue_size=queue_size,
+            identity=identity if identity is not None else (login.username if login else None),
         )
         self.url = url if isinstance(url, BrokerUrl) else BrokerUrl.parse(url)
+        if login is not None:
+            if self.url.username not in (None, login.username):
+                raise BusUrlError(
+                    f"the broker URL {self.url} names user {self.url.username!r}, but this"
+                    f" client logs in as {login.username!r}"
+                )
+            password = login.password if login.password is not None else self.url.password
+            self.url = dataclasses.replace(self.url, username=login.username, password=password)
         if qos not in (0, 1, 2):
             raise ValueError(f"qos must be 0, 1 or 2, got {qos!r}")
         if tls_context is not None and not self.url.tls:
@@ -384,6 +503,7 @@ class MqttBus(Bus):
             self.url.host,
             self.url.port,
             deliver=self._receive,
+            on_denied=self._denied,
             username=self.url.username,
             password=self.url.password,
             identifier=self.client_id,
@@ -479,6 +599,19 @@ class MqttBus(Bus):
         except TimeoutError:
             return False
         return True
+
+    def _denied(self, reason: ReasonCode) -> None:
+        self._counts["denied"] += 1
+        count = self._counts["denied"]
+        if count == 10 ** (len(str(count)) - 1):  # 1st, 10th, 100th, ...
+            log.warning(
+                "bus %s: the broker at %s refused a publish (%s; %d so far): not a topic of"
+                " this login's?",
+                self.client_id,
+                self.url,
+                reason,
+                count,
+            )
 
     def _receive(self, topic: str, payload: bytes, properties: Properties | None) -> None:
         filters = None

@@ -141,3 +141,149 @@ ALL_LOCAL_ESTIMATES = TopicFilter(f"{ROOT}/estimate/local/+")
 ALL_STATUS = TopicFilter(f"{ROOT}/status/+")
 ALL_LINKS = TopicFilter(f"{ROOT}/status/+/link")
 ALL_COMMANDS = TopicFilter(f"{ROOT}/command/+")
+
+
+# --- who may publish what where: identity bound to topics (docs/bus.md, "Identity") -----------
+#
+# Every client of a mission is one identity: the ground station ``ground`` and one agent per
+# vehicle, ``agent-{i}`` for the 0-based vehicle index i (the topics' own numbering). With a
+# broker that authenticates, the client's login is its identity. A message on one of the
+# layout's topics is believed only when its ``sender`` is an identity the topic permits, its
+# ``kind`` is the topic's and the vehicle it is about is the topic's vehicle; both buses check
+# this on receipt (``Bus._ingest``) and drop anything else, counted by reason.
+
+GROUND = "ground"
+OPERATOR = "operator"  # the operator's console of ``standoff fly`` (in-process, beside the ground)
+AGENT_PREFIX = "agent-"
+MAX_VEHICLE = 254  # vehicle i flies as MAVLink system id i + 1 (1..255)
+COMMANDERS = frozenset({GROUND, OPERATOR})
+
+
+def agent(vehicle: int) -> str:
+    """The identity (bus client name and broker login) of vehicle ``vehicle``'s agent."""
+    if isinstance(vehicle, bool) or not isinstance(vehicle, int) or not 0 <= vehicle <= MAX_VEHICLE:
+        raise TopicError(f"vehicle index must be an int in 0..{MAX_VEHICLE}, got {vehicle!r}")
+    return f"{AGENT_PREFIX}{vehicle}"
+
+
+def _index(text: str) -> int | None:
+    """A vehicle index written canonically (``0``, ``17``; not ``01``, ``+1`` or ``1.0``)."""
+    if not text.isascii() or not text.isdigit() or (len(text) > 1 and text[0] == "0"):
+        return None
+    value = int(text)
+    return value if value <= MAX_VEHICLE else None
+
+
+def vehicle_of(identity: str) -> int | None:
+    """The vehicle an agent's identity flies (``agent-2`` -> 2); None for any other name."""
+    if not identity.startswith(AGENT_PREFIX):
+        return None
+    return _index(identity[len(AGENT_PREFIX) :])
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Binding:
+    """What one topic of the layout carries: its message kind, the identities that may
+    publish on it, and the vehicle it is about (None: no vehicle, e.g. the mission state)."""
+
+    kind: str
+    senders: frozenset[str]
+    vehicle: int | None = None
+
+
+_VEHICLE_TOPICS = {  # topic levels after ROOT, with {v} the vehicle: kind, may the ground send
+    ("obs",): ("observation", True),
+    ("estimate", "local"): ("estimate.local", False),
+    ("status",): ("status", False),
+    ("command",): ("command", None),  # commands: the ground's alone, never the vehicle's
+}
+_GROUND_TOPICS = {
+    ("estimate", "global"): "estimate.global",
+    ("mission",): "mission",
+    ("epoch",): "epoch",
+}
+_ROOT_LEVELS = tuple(ROOT.split("/"))
+
+
+def binding(topic: Topic | str) -> Binding | None:
+    """What ``topic`` may carry and from whom, when it is one of the layout's topics.
+
+    None for a topic outside ``standoff/v1/`` (another program's, e.g. an external tracker's
+    feed: not the mission's to police). A topic inside it that the layout does not have is
+    bound to nobody (``senders`` empty): nothing published there is believed.
+    """
+    name = topic.value if isinstance(topic, Topic) else topic
+    levels = tuple(name.split("/"))
+    if levels[: len(_ROOT_LEVELS)] != _ROOT_LEVELS:
+        return None
+    rest = levels[len(_ROOT_LEVELS) :]
+    if rest in _GROUND_TOPICS:
+        return Binding(_GROUND_TOPICS[rest], frozenset({GROUND}))
+    if rest == ("command", "all"):
+        return Binding("command", COMMANDERS)
+    if rest == ("status", GROUND, "link"):
+        return Binding("link", frozenset({GROUND}))
+    if len(rest) == 3 and rest[0] == "status" and rest[2] == "link":
+        v = _index(rest[1])
+        return _NOBODY if v is None else Binding("link", frozenset({agent(v)}), v)
+    if rest and rest[:-1] in _VEHICLE_TOPICS:
+        kind, ground_too = _VEHICLE_TOPICS[rest[:-1]]
+        v = _index(rest[-1])
+        if v is None:
+            return _NOBODY
+        if ground_too is None:
+            return Binding(kind, COMMANDERS, v)
+        senders = {agent(v), GROUND} if ground_too else {agent(v)}
+        return Binding(kind, frozenset(senders), v)
+    return _NOBODY
+
+
+_NOBODY = Binding("", frozenset())
+
+# why a received message was not believed (``Bus.drops`` counts each)
+UNKNOWN_TOPIC = "unknown_topic"  # inside the layout's root, but not one of its topics
+WRONG_KIND = "wrong_kind"  # e.g. a status on the mission topic
+WRONG_SENDER = "wrong_sender"  # a sender the topic does not permit (agent-1 on status/0)
+WRONG_VEHICLE = "wrong_vehicle"  # about another vehicle than the topic's (status/1 for vehicle 0)
+REFUSALS = (UNKNOWN_TOPIC, WRONG_KIND, WRONG_SENDER, WRONG_VEHICLE)
+
+
+def kind_of(message: object) -> str:
+    """A bus message's ``kind`` (every concrete ``Message`` has one; ``?`` for anything else)."""
+    kind = getattr(message, "kind", None)
+    return kind if isinstance(kind, str) else "?"
+
+
+def refusal(topic: Topic | str, message: object) -> str | None:
+    """Why ``message`` on ``topic`` is not to be believed (one of ``REFUSALS``), or None.
+
+    The message's sender must be one of the identities the topic permits, its kind the topic's,
+    and the vehicle it is about the topic's: a ``vehicle`` field (status, estimate, observation,
+    presence) equal to it, and a command on ``command/{v}`` addressed to vehicle v alone (one
+    on ``command/all`` may name any). This is all a receiver can check from the message itself:
+    that the sender is who it says is the broker's part (its login and ACL,
+    ``configs/mosquitto/``), or a signature's.
+    """
+    bound = binding(topic)
+    if bound is None:
+        return None
+    if not bound.senders:
+        return UNKNOWN_TOPIC
+    if kind_of(message) != bound.kind:
+        return WRONG_KIND
+    if getattr(message, "sender", None) not in bound.senders:
+        return WRONG_SENDER
+    if bound.kind == "command":
+        vehicles = getattr(message, "vehicles", None)
+        if bound.vehicle is not None and vehicles != (bound.vehicle,):
+            return WRONG_VEHICLE
+    elif getattr(message, "vehicle", None) != bound.vehicle:
+        return WRONG_VEHICLE
+    return None
+
+
+def may_publish(identity: str, topic: Topic | str) -> bool:
+    """Whether ``identity`` may publish on ``topic`` at all (what the broker's ACL grants it;
+    a topic outside the layout is anyone's as far as the mission is concerned)."""
+    bound = binding(topic)
+    return bound is None or identity in bound.senders
