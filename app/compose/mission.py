@@ -25,9 +25,10 @@ from app.compose.parts import (
     MissionResult,
     bring_up,
     clock_rate,
+    gcs_endpoint,
     ground_station,
     open_links,
-    recording_tlogs,
+    recording_inputs,
     vehicle_agent,
     write_outputs,
 )
@@ -72,6 +73,7 @@ class Mission:
         simulator: SimulatorServer | None = None,
         clock: Clock = SYSTEM_CLOCK,
         operator: AsyncIterator[str] | None = None,
+        notify: Callable[[str], None] | None = None,
     ) -> None:
         cfg = plan.config
         self.plan = plan
@@ -95,6 +97,7 @@ class Mission:
         self._simulator = simulator
         self._clock = clock
         self._operator = operator
+        self._notify = notify  # a line for the operator (each vehicle link and its relay)
         self.mission_clock: MissionClock | None = None
 
     async def run(self) -> MissionResult:
@@ -153,9 +156,18 @@ class Mission:
             bus=self.broker_url or "in-process",
         )
         self.links = await stack.enter_async_context(
-            open_links(plan, urls, range(plan.count), self.builtin, self.mission_clock)
+            open_links(
+                plan,
+                urls,
+                range(plan.count),
+                self.builtin,
+                self.mission_clock,
+                out_dir=self.out_dir,  # each vehicle's traffic into its .tlog, through a relay
+                gcs=gcs_endpoint(plan),
+                notify=self._notify,
+            )
         )
-        await stack.enter_async_context(recording_tlogs(self.links, self.out_dir, self._clock))
+        recorder = stack.enter_context(recording_inputs(plan, self.out_dir, self.builtin))
         async with asyncio.TaskGroup() as tg:
             for i, link in self.links.items():
                 tg.create_task(
@@ -178,13 +190,14 @@ class Mission:
             builtin=self.builtin,
             replay=self._replay,
             on_snapshot=self._on_snapshot,
+            recorder=recorder,
         )
         agents = []
         for i, link in self.links.items():
             name = f"agent-{i}"
             will = Will(topics.link(i), LinkState(sender=name, t_s=0.0, online=False, vehicle=i))
             bus = await client(name, will)
-            agents.append(vehicle_agent(plan, i, link, bus, events, self.builtin))
+            agents.append(vehicle_agent(plan, i, link, bus, events, self.builtin, recorder))
         self.agents = agents
         self.ground = ground
         try:

@@ -1,7 +1,6 @@
 """The parts of a mission, built in one place for ``fly``, ``ground`` and ``agent`` alike: the
 vehicle links, the ground station, the agents, their logs, and the run folder at the end."""
 
-import asyncio
 import dataclasses
 import logging
 import math
@@ -12,12 +11,15 @@ from pathlib import Path
 from typing import Any
 
 from app.adapters.eventlog import EventLog
-from app.adapters.tlog import TlogWriter, record_tlog
+from app.adapters.observations_log import OBSERVATIONS_FILE, ObservationLog
+from app.adapters.tlog import TlogRecorder
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
+from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
+from app.adapters.vehicle.mavsdk.urls import UdpEndpoint, parse_gcs_endpoint, udp_endpoint_of_url
 from app.config.plan import MissionPlan
 from app.core.mission.team import TeamSample
-from app.report.run_folder import write_run_folder
+from app.report.run_folder import write_run_config, write_run_folder
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.ground import (
     GroundRuntimeParams,
@@ -28,8 +30,8 @@ from app.runtime.ground import (
     TickSource,
 )
 from app.runtime.ports.bus import Bus
-from app.runtime.ports.clock import Clock
 from app.runtime.ports.events import EventSink
+from app.runtime.ports.record import InputRecorder
 from app.runtime.ports.vehicle import GeodeticOrigin, VehicleLink
 from app.runtime.ports.view import MissionSnapshot
 from app.runtime.vehicle import BringUp
@@ -77,12 +79,20 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         autopilot=autopilot,
         link_timeout_s=cfg.link.link_timeout_s,
         clock_window_s=cfg.link.clock_window_s,
+        camera_component_id=cfg.link.camera_component_id,
     )
 
 
 def clock_rate(plan: MissionPlan, builtin: bool) -> float:
     """Mission seconds per host second: the built-in simulator's speed-up, else 1."""
     return plan.config.sim.speedup if builtin else 1.0
+
+
+def gcs_endpoint(plan: MissionPlan) -> UdpEndpoint | None:
+    """Where a ground station beside the app sees the vehicles (``[link] gcs_forward``; None:
+    nowhere)."""
+    spec = plan.config.link.gcs_forward
+    return None if spec in ("", "off") else parse_gcs_endpoint(spec)
 
 
 @asynccontextmanager
@@ -92,20 +102,70 @@ async def open_links(
     vehicles: Sequence[int],
     builtin: bool,
     mission_clock: Callable[[], float | None] | None = None,
+    *,
+    out_dir: Path | None = None,
+    gcs: UdpEndpoint | None = None,
+    notify: Callable[[str], None] | None = None,
 ) -> AsyncIterator[dict[int, VehicleLink]]:
     """One MAVSDK hub on ``urls`` and a link to each of ``vehicles`` (0-based: system id i+1),
-    every vehicle's boot clock mapped onto ``mission_clock`` (``MissionClock``)."""
+    every vehicle's boot clock mapped onto ``mission_clock`` (``MissionClock``).
+
+    With ``out_dir`` or ``gcs``, every UDP connection goes through a ``MavlinkRelay``: each
+    vehicle's traffic, both ways, recorded in ``out_dir/vehicle-{i+1}.tlog`` from the links'
+    opening (the take-off and the climb to the hand-over are in the flight log), and served to
+    the ground station at ``gcs``. ``notify``: a line per connection for the operator."""
     cfg = plan.config
     origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
     config = link_config(plan, builtin)
     async with AsyncExitStack() as stack:
-        hub = await stack.enter_async_context(MavsdkHub(urls, origin, mission_clock=mission_clock))
+        recorder = (
+            stack.enter_context(TlogRecorder.for_vehicles(out_dir, [i + 1 for i in vehicles]))
+            if out_dir is not None
+            else None
+        )
+        app_urls = list(urls)
+        if recorder is not None or gcs is not None:
+            app_urls = [
+                await _relayed(stack, url, k, vehicles, urls, recorder, gcs, notify)
+                for k, url in enumerate(urls)
+            ]
+        hub = await stack.enter_async_context(
+            MavsdkHub(app_urls, origin, mission_clock=mission_clock)
+        )
         links: dict[int, VehicleLink] = {}
         for i in vehicles:
             links[i] = await stack.enter_async_context(
                 hub.link(i + 1, config, timeout_s=cfg.link.connect_timeout_s)
             )
         yield links
+
+
+async def _relayed(
+    stack: AsyncExitStack,
+    url: str,
+    k: int,
+    vehicles: Sequence[int],
+    urls: Sequence[str],
+    recorder: TlogRecorder | None,
+    gcs: UdpEndpoint | None,
+    notify: Callable[[str], None] | None,
+) -> str:
+    """The URL MAVSDK opens for connection ``k``: its relay's, or the connection itself when it
+    is not UDP (TCP, serial: flown directly, with no flight log and no ground station)."""
+    endpoint = udp_endpoint_of_url(url)
+    if endpoint is None:
+        _log.warning(
+            "%s is flown directly: the relay (flight log, ground station) takes UDP only", url
+        )
+        return url
+    # vehicle i's own ground-station port when each connection is one vehicle
+    index = vehicles[k] if len(urls) == len(vehicles) else k
+    relay = await stack.enter_async_context(
+        MavlinkRelay(endpoint, recorder=recorder, gcs=gcs, gcs_index=index, name=f"relay {url}")
+    )
+    if notify is not None:
+        notify(f"  {relay.describe()}")
+    return relay.app_url
 
 
 def observation_sources(plan: MissionPlan, replay: Sequence[Measurement] = ()) -> list[TickSource]:
@@ -126,6 +186,7 @@ def ground_station(
     replay: Sequence[Measurement] = (),
     on_snapshot: Callable[[MissionSnapshot], None] | None = None,
     name: str = "ground",
+    recorder: InputRecorder | None = None,
 ) -> GroundStation:
     """The ground station of the plan. The simulated truth (for the summary's errors) is the
     plan's target path when the vehicles are the built-in simulator or the ground simulates the
@@ -136,18 +197,40 @@ def ground_station(
         GroundRuntimeParams(end_t_s=plan.end_t_s),
         bus,
         events,
-        truth=plan.target if builtin or cfg.observations.source == "simulated" else None,
+        truth=plan.target if scored_against_truth(plan, builtin) else None,
         sources=observation_sources(plan, replay),
         external_observations=cfg.observations.external_topic
         if cfg.observations.source == "external"
         else None,
         on_snapshot=on_snapshot,
         name=name,
+        recorder=recorder,
+    )
+
+
+def scored_against_truth(plan: MissionPlan, builtin: bool) -> bool:
+    """Whether the run's figures are scored against the plan's target path (the built-in
+    simulator flies it, or the ground simulates the observations), else about the estimate."""
+    return builtin or plan.config.observations.source == "simulated"
+
+
+def recording_inputs(plan: MissionPlan, out_dir: Path, builtin: bool) -> ObservationLog:
+    """The run folder's ``config.json`` (the resolved mission file) and its
+    ``observations.jsonl`` recorder (to enter), what ``standoff replay`` re-runs."""
+    write_run_config(out_dir, plan.config)
+    return ObservationLog(
+        out_dir / OBSERVATIONS_FILE, plan.count, truth=scored_against_truth(plan, builtin)
     )
 
 
 def vehicle_agent(
-    plan: MissionPlan, vehicle: int, link: VehicleLink, bus: Bus, events: EventSink, builtin: bool
+    plan: MissionPlan,
+    vehicle: int,
+    link: VehicleLink,
+    bus: Bus,
+    events: EventSink,
+    builtin: bool,
+    recorder: InputRecorder | None = None,
 ) -> VehicleAgent:
     """Vehicle ``vehicle``'s agent, at its own altitude of the stack, its phase actuator the
     file's choice resolved against what its autopilot honours; on the built-in simulator its
@@ -163,36 +246,8 @@ def vehicle_agent(
             clock_rate=clock_rate(plan, builtin),
             phase_actuator=plan.phase_actuator,
         ),
+        recorder=recorder,
     )
-
-
-def tlog_writer(out_dir: Path, vehicle: int, clock: Clock) -> TlogWriter:
-    """Vehicle ``vehicle``'s ``vehicle-{vehicle+1}.tlog``, stamped from now."""
-    return TlogWriter(out_dir / f"vehicle-{vehicle + 1}.tlog", vehicle + 1, clock.time_s())
-
-
-@asynccontextmanager
-async def recording_tlogs(
-    links: Mapping[int, VehicleLink], out_dir: Path, clock: Clock
-) -> AsyncIterator[None]:
-    """Every link's telemetry into its ``vehicle-{i+1}.tlog`` for the block (opened as the
-    links are, so that the take-off and the climb to the hand-over are in the flight log)."""
-    async with AsyncExitStack() as stack:
-        writers = {i: stack.enter_context(tlog_writer(out_dir, i, clock)) for i in links}
-        tasks = [
-            asyncio.create_task(record_tlog(link, writers[i]), name=f"tlog-{i + 1}")
-            for i, link in links.items()
-        ]
-        try:
-            yield
-        finally:
-            for task in tasks:
-                task.cancel()
-            for task, outcome in zip(
-                tasks, await asyncio.gather(*tasks, return_exceptions=True), strict=True
-            ):
-                if isinstance(outcome, Exception):
-                    _log.error("%s stopped early: %s", task.get_name(), outcome)
 
 
 def counters_of(thing: object) -> dict[str, Any] | None:

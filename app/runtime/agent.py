@@ -38,6 +38,7 @@ from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus, Subscription
 from app.runtime.ports.events import EventSink
+from app.runtime.ports.record import InputRecorder
 from app.runtime.ports.vehicle import (
     ClockRebased,
     CourseSpeedCommand,
@@ -71,7 +72,11 @@ class AgentRuntimeParams:
     frames waited (``_frame_wait``). ``load_*``: when to warn that the agent skips too many
     telemetry frames (``_watch_load``). ``phase_actuator``: the phase actuator the mission file
     asks for, resolved at start against what the vehicle's autopilot honours
-    (``VehicleLink.honours_speed``; None: fly the agent parameters as given)."""
+    (``VehicleLink.honours_speed``; None: fly the agent parameters as given).
+    ``max_fix_rate_hz``, ``fix_burst``: the camera's fixes taken from the link, at most this
+    rate (by their vehicle time) after a burst of this many; the rest are dropped, counted
+    (``fixes_rate_limited``): a burst of forged fixes into the vehicle's MAVLink port costs the
+    filter a handful of gated updates, not a lost track."""
 
     altitude_m: float | None = None
     status_period_s: float = 0.1
@@ -82,6 +87,8 @@ class AgentRuntimeParams:
     load_warn_share: float = 0.2
     load_warn_every_s: float = 30.0
     phase_actuator: ActuatorChoice | None = None
+    max_fix_rate_hz: float = 20.0
+    fix_burst: int = 5
 
 
 @dataclass
@@ -97,6 +104,35 @@ class AgentCounters:
     frames_skipped: int = 0  # telemetry frames that queued while a tick ran, steered past
     frame_wait_max_s: float = 0.0  # longest a steered frame waited for its tick (vehicle s)
     frame_wait_sum_s: float = 0.0  # summed over the ticks (mean: / ticks)
+    messages_refused: int = 0  # bus messages not believed (stamped ahead, a fused estimate off)
+    message_errors: int = 0  # bus messages whose handling failed (logged, skipped)
+    tick_errors: int = 0  # control ticks that failed (logged, skipped)
+    commands_nonfinite: int = 0  # commands with a non-finite value: the tick sent nothing
+    fixes_rate_limited: int = 0  # camera fixes over the link's rate limit, dropped
+    ground_silent_holds: int = 0  # holds because the ground station went silent
+
+
+class _FixBucket:
+    """A token bucket on the fixes' own (vehicle) time: ``burst`` at once, then ``rate_hz``."""
+
+    def __init__(self, rate_hz: float, burst: int) -> None:
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0 and burst >= 1):
+            raise ValueError(f"fix rate must be > 0 and burst >= 1, got {rate_hz!r}, {burst!r}")
+        self._rate = rate_hz
+        self._burst = float(burst)
+        self._tokens = float(burst)
+        self._t = -math.inf
+
+    def take(self, t_s: float) -> bool:
+        if not math.isfinite(t_s):
+            return True  # the filter refuses it and counts it
+        if math.isfinite(self._t) and t_s > self._t:
+            self._tokens = min(self._burst, self._tokens + (t_s - self._t) * self._rate)
+        self._t = max(self._t, t_s)
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            return True
+        return False
 
 
 @dataclass
@@ -134,6 +170,7 @@ class VehicleAgent:
         bus_client: Bus,
         events: EventSink,
         runtime: AgentRuntimeParams = AgentRuntimeParams(),
+        recorder: InputRecorder | None = None,
     ) -> None:
         self.actuator: PhaseActuator | None = None
         if runtime.phase_actuator is not None:
@@ -159,9 +196,12 @@ class VehicleAgent:
         self._bus = bus_client
         self._events = events
         self._runtime = runtime
+        self._recorder = recorder  # what the local filter is fed, for ``standoff replay``
         self._pilot_mode: str | None = None  # the mode someone else put the vehicle in
         self._last_t = 0.0
         self._load = _LoadWindow()
+        self._fixes = _FixBucket(runtime.max_fix_rate_hz, runtime.fix_burst)
+        self._faults: dict[str, int] = {}
 
     @property
     def pilot_has_control(self) -> bool:
@@ -195,48 +235,86 @@ class VehicleAgent:
 
     async def _control(self) -> None:
         async for queued in self._link.telemetry():
-            # steer on the newest frame: frames that queued up while the loop was busy are
-            # history, and acting on each in turn would only add lag
-            newest = self._link.latest
-            frame = newest if newest is not None and newest.t_s > queued.t_s else queued
-            t = frame.t_s
-            self._load.frames += 1
-            if t <= self._last_t and self.counters.ticks > 0:
-                # another message of the same instant, or one the last tick already skipped
-                self.counters.frames_skipped += 1
-                self._load.skipped += 1
-                continue
-            self._last_t = t
-            self._watch_load(t)
-            own = OwnTelemetry(
-                frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s
-            )
-            self._frame_wait(frame)
             try:
-                self.state, out = logic.step(self.state, logic.Control(t, own), self.params)
-            except ValueError as exc:  # a non-finite frame: never steer on it
-                self._events.emit(
-                    "telemetry_rejected", t, vehicle=self.params.vehicle, reason=str(exc)
+                await self._tick(queued)
+            except Exception as exc:  # one bad tick never ends the agent: counted, logged
+                self.counters.tick_errors += 1
+                self._fault("tick_failed", self._last_t, exc)
+
+    async def _tick(self, queued: VehicleTelemetry) -> None:
+        # steer on the newest frame: frames that queued up while the loop was busy are
+        # history, and acting on each in turn would only add lag
+        newest = self._link.latest
+        frame = newest if newest is not None and newest.t_s > queued.t_s else queued
+        t = frame.t_s
+        self._load.frames += 1
+        if t <= self._last_t and self.counters.ticks > 0:
+            # another message of the same instant, or one the last tick already skipped
+            self.counters.frames_skipped += 1
+            self._load.skipped += 1
+            return
+        self._last_t = t
+        self._watch_load(t)
+        own = OwnTelemetry(frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s)
+        self._frame_wait(frame)
+        try:
+            self.state, out = logic.step(self.state, logic.Control(t, own), self.params)
+        except ValueError as exc:  # a non-finite frame: never steer on it
+            self._events.emit("telemetry_rejected", t, vehicle=self.params.vehicle, reason=str(exc))
+            return
+        self.counters.ticks += 1
+        for event in out.events:
+            self._events.emit(
+                event.kind, event.t_s, vehicle=self.params.vehicle, detail=event.detail
+            )
+            if event.kind == "ground_silent":
+                await self._silent_hold(t)
+        if out.command is not None and self._pilot_mode is None:
+            c = out.command
+            rate = c.course_rate_ff_rad_s
+            if not all(math.isfinite(v) for v in (c.course_rad, c.speed_m_s, rate)):
+                self.counters.commands_nonfinite += 1
+                self._fault(
+                    "command_nonfinite", t, f"course {c.course_rad!r}, speed {c.speed_m_s!r}"
                 )
-                continue
-            self.counters.ticks += 1
-            for event in out.events:
-                self._events.emit(
-                    event.kind, event.t_s, vehicle=self.params.vehicle, detail=event.detail
-                )
-            if out.command is not None and self._pilot_mode is None:
+            else:
                 await self._send(
                     t,
                     CourseSpeedCommand(
-                        out.command.course_rad,
-                        out.command.speed_m_s,
+                        c.course_rad,
+                        c.speed_m_s,
                         self._runtime.altitude_m,
-                        course_rate_rad_s=self._feed_forward(out.command.course_rate_ff_rad_s),
+                        course_rate_rad_s=self._feed_forward(rate),
                     ),
                 )
-            self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
-            if out.status is not None:
-                await self._publish_status(out.status)
+        self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
+        if out.status is not None:
+            await self._publish_status(out.status)
+
+    async def _silent_hold(self, t: float) -> None:
+        """The ground station went silent for too long: the vehicle holds (the rule of
+        ``MissionAgentParams.ground_silent_hold_s``) until a ``resume``."""
+        self.counters.ground_silent_holds += 1
+        log.warning("agent %d: the ground station is silent: holding", self.params.vehicle)
+        if self._pilot_mode is None:
+            try:
+                await self._link.hold()
+            except LinkError as exc:
+                self._events.emit(
+                    "command_refused", t, vehicle=self.params.vehicle, reason=str(exc)
+                )
+
+    def _fault(self, kind: str, t: float, error: object) -> None:
+        """An error in one message or one tick: an event and a log line at its 1st, 2nd, 5th,
+        10th, 20th ... occurrence (a flood of them must not flood the log), counted."""
+        n = self._faults[kind] = self._faults.get(kind, 0) + 1
+        if not _log_spaced(n):
+            return
+        detail = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else error
+        log.warning("agent %d: %s (%d so far): %s", self.params.vehicle, kind, n, detail)
+        self._events.emit(
+            kind, t, vehicle=self.params.vehicle, count=n, repeat=n > 1, detail=str(detail)[:300]
+        )
 
     def _feed_forward(self, rate_rad_s: float) -> float:
         """The wanted course's rate, held to what the airframe can turn (the field asks for
@@ -355,6 +433,10 @@ class VehicleAgent:
             nonlocal done
             try:
                 async for seen in self._link.observations():
+                    if not self._fixes.take(seen.t_s):
+                        self.counters.fixes_rate_limited += 1
+                        self._fault("fix_rate_limited", seen.t_s, "camera fixes over the limit")
+                        continue
                     pending.append(seen)
                     ready.set()
             finally:
@@ -368,17 +450,23 @@ class VehicleAgent:
                 ready.clear()
                 batch = pending[:]
                 pending.clear()
-                sensor = self.params.sensor
-                observations = [
-                    Observation(s.t_s, sensor, s.east_m, s.north_m, s.sigma_m) for s in batch
-                ]
-                merged = merge_backlog(
-                    observations, self._runtime.merge_window_s, self.params.local.default_sigma_m
-                )
-                self.counters.observations_merged += len(observations) - len(merged)
-                for obs in merged:
-                    await self._use_observation(obs)
-                    await self._publish_observation(obs)
+                try:
+                    await self._take_fixes(batch)
+                except Exception as exc:  # one bad batch never ends the camera: counted
+                    self.counters.message_errors += 1
+                    self._fault("fix_failed", self._last_t, exc)
+
+    async def _take_fixes(self, batch: list[TargetObservation]) -> None:
+        sensor = self.params.sensor
+        observations = [Observation(s.t_s, sensor, s.east_m, s.north_m, s.sigma_m) for s in batch]
+        merged = merge_backlog(
+            observations, self._runtime.merge_window_s, self.params.local.default_sigma_m
+        )
+        self.counters.observations_merged += len(observations) - len(merged)
+        for obs in merged:
+            used = await self._use_observation(obs)
+            if used:
+                await self._publish_observation(obs)
 
     async def _publish_observation(self, obs: Observation) -> None:
         sigma = obs.sigma_m
@@ -396,6 +484,8 @@ class VehicleAgent:
         await self._bus.publish(topics.observation(self.params.vehicle), message)
 
     async def _use_observation(self, obs: Observation) -> None:
+        if self._recorder is not None:
+            self._recorder.observation(self.params.vehicle, obs)
         self.state, out = logic.step(self.state, logic.Observed(obs), self.params)
         report = out.report
         if report is not None and not report.used:
@@ -414,41 +504,57 @@ class VehicleAgent:
                 topics.local_estimate(self.params.vehicle),
                 local_to_bus(out.estimate, self.params.vehicle, self.name),
             )
+        return True
 
     async def _hear(self, subscription: Subscription) -> None:
         async for _topic, message in subscription:
-            match message:
-                case bus.TargetObservation() if message.sender != self.name:
-                    await self._use_observation(observation_to_core(message, self.params.vehicle))
-                case bus.GlobalEstimate():
-                    heard = logic.HeardFused(global_to_core(message))
-                    self.state, _ = logic.step(self.state, heard, self.params)
-                case bus.MissionState():
-                    mission = logic.HeardMission(message.stage, message.active)
-                    self.state, out = logic.step(self.state, mission, self.params)
-                    if out.stage is not None:
-                        self._events.emit(
-                            "agent_stage",
-                            message.t_s,
-                            vehicle=self.params.vehicle,
-                            stage=out.stage.value,
-                        )
-                case bus.VehicleStatus() if message.vehicle != self.params.vehicle:
-                    fix = logic.TeammateFix(
+            try:
+                await self._heard(message)
+            except Exception as exc:  # one bad message never ends the agent: counted, logged
+                self.counters.message_errors += 1
+                self._fault("message_failed", self._last_t, exc)
+
+    async def _heard(self, message: bus.Message) -> None:
+        out: logic.AgentOutbox | None = None
+        match message:
+            case bus.TargetObservation() if message.sender != self.name:
+                await self._use_observation(observation_to_core(message, self.params.vehicle))
+            case bus.GlobalEstimate():
+                heard = logic.HeardFused(global_to_core(message))
+                self.state, out = logic.step(self.state, heard, self.params)
+            case bus.MissionState():
+                mission = logic.HeardMission(message.stage, message.active, message.t_s)
+                self.state, out = logic.step(self.state, mission, self.params)
+                if out.stage is not None:
+                    self._events.emit(
+                        "agent_stage",
                         message.t_s,
-                        message.east_m,
-                        message.north_m,
-                        message.course_rad,
-                        message.speed_m_s,
+                        vehicle=self.params.vehicle,
+                        stage=out.stage.value,
                     )
-                    teammate = logic.HeardTeammate(message.vehicle, fix)
-                    self.state, _ = logic.step(self.state, teammate, self.params)
-                case bus.Command() if (
-                    message.vehicles is None or self.params.vehicle in message.vehicles
-                ):
-                    await self._obey(message)
-                case _:
-                    pass
+            case bus.VehicleStatus() if message.vehicle != self.params.vehicle:
+                fix = logic.TeammateFix(
+                    message.t_s,
+                    message.east_m,
+                    message.north_m,
+                    message.course_rad,
+                    message.speed_m_s,
+                )
+                teammate = logic.HeardTeammate(message.vehicle, fix)
+                self.state, out = logic.step(self.state, teammate, self.params)
+            case bus.Command() if (
+                message.vehicles is None or self.params.vehicle in message.vehicles
+            ):
+                await self._obey(message)
+            case _:
+                pass
+        if out is not None and out.refused:
+            self.counters.messages_refused += 1
+            self._fault(
+                "message_refused",
+                self._last_t,
+                f"{message.kind} from {message.sender}: {out.refused}",
+            )
 
     async def _obey(self, message: bus.Command) -> None:
         t = self._last_t

@@ -21,6 +21,7 @@ from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.ports.bus import Bus, Subscription
 from app.runtime.ports.events import EventSink
+from app.runtime.ports.record import InputRecorder
 from app.runtime.ports.view import MissionSnapshot, VehicleRow
 from app.runtime.wire import global_to_bus, local_to_core
 
@@ -120,6 +121,7 @@ class GroundStation:
         external_observations: str | None = None,
         on_snapshot: Callable[[MissionSnapshot], None] | None = None,
         name: str = "ground",
+        recorder: InputRecorder | None = None,
     ) -> None:
         self.params = params
         self.runtime = runtime
@@ -133,6 +135,7 @@ class GroundStation:
         self._external = external_observations
         self._on_snapshot = on_snapshot
         self._piloted: set[int] = set()
+        self._recorder = recorder  # what the fusion and the stages are fed (``standoff replay``)
 
     async def run(self) -> None:
         try:
@@ -164,12 +167,16 @@ class GroundStation:
                         # its agent is told to resume
                         healthy=message.healthy and message.control != "pilot",
                     )
+                    if self._recorder is not None:
+                        self._recorder.status(message.vehicle, report)
                     heard = logic.HeardStatuses(((message.vehicle, report),))
                     self.state, out = logic.step(self.state, heard, self.params, self._truth)
                     if out.tick_t_s is not None:
                         await self._carry(out.tick_t_s, out)
                 case bus.LocalEstimate():
                     local = logic.HeardLocal(local_to_core(message))
+                    if self._recorder is not None:
+                        self._recorder.local(message.vehicle, message.t_s)
                     self.state, _ = logic.step(self.state, local, self.params)
                 case _:
                     pass

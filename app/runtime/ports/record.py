@@ -1,0 +1,27 @@
+"""The input-recorder port: what estimation and the mission's decisions were fed, in order.
+
+An agent tells it each observation it is about to feed its local filter and each fused estimate
+it is about to apply; the ground station each vehicle status and each local estimate it is about
+to take. Called just before the core's step that consumes the input, with nothing awaited in
+between, so that in one process the calls come in the order the steps ran: enough to re-run the
+local filters, the fusion and the stage logic offline (``standoff replay``).
+"""
+
+from typing import Protocol
+
+from app.core.estimation.messages import Observation
+from app.core.mission.ground import VehicleReport
+
+
+class InputRecorder(Protocol):
+    def observation(self, vehicle: int, obs: Observation) -> None:
+        """Agent ``vehicle`` feeds ``obs`` to its local filter."""
+
+    def fused(self, vehicle: int, t_s: float) -> None:
+        """Agent ``vehicle`` applies the fused estimate of mission time ``t_s``."""
+
+    def status(self, vehicle: int, report: VehicleReport) -> None:
+        """The ground station takes vehicle ``vehicle``'s status ``report``."""
+
+    def local(self, vehicle: int, t_s: float) -> None:
+        """The ground station takes vehicle ``vehicle``'s local estimate of time ``t_s``."""
