@@ -148,7 +148,8 @@ WILL_CLIENT = textwrap.dedent(
     async def main(url):
         will = Will(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5))
         async with MqttBus(url, client_id="agent-5", will=will) as bus:
-            await bus.publish(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=True, vehicle=5))
+            online = LinkState(sender="agent-5", t_s=0.0, online=True, vehicle=5)
+            await bus.publish(topics.link(5), online)
             print("ready", flush=True)
             await asyncio.Event().wait()
 
