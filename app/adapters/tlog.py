@@ -1,57 +1,44 @@
-"""MAVLink telemetry logs (``.tlog``) that MAVProxy, QGroundControl and pymavlink can replay.
+"""MAVLink telemetry logs (``.tlog``) as QGroundControl, MAVProxy and pymavlink write and replay
+them: records of an 8-byte big-endian timestamp (microseconds since the Unix epoch) followed by
+one MAVLink packet as it went over the link.
 
-A .tlog is a sequence of records: an 8-byte big-endian timestamp (microseconds since the Unix
-epoch) followed by one packed MAVLink packet. The mission writes one per vehicle from the
-telemetry it received through MAVSDK, re-encoded with pymavlink, so the log reads the same
-whichever autopilot flew.
+The mission records one per vehicle: every packet the vehicle sent (autopilot, camera and any
+other component) and every packet sent to it (by the app, or by a ground station beside it),
+stamped with the wall-clock time the relay (``app.adapters.vehicle.mavsdk.relay``) received it.
+Nothing is re-encoded: the log holds the bytes that flew.
 """
 
+from __future__ import annotations
+
+import contextlib
+import logging
 import math
 import struct
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import TracebackType
 from typing import BinaryIO, Self
 
-from pymavlink.dialects.v20 import common as mavlink
-
-from app.runtime.ports.vehicle import VehicleLink
-
-# PX4 custom mode: main mode in bits 16-23 (6 = offboard, 4 = auto with sub mode 3 = loiter)
-PX4_CUSTOM_MODES = {"offboard": 6 << 16, "hold": (4 << 16) | (3 << 24)}
-
-
-@dataclass(frozen=True, slots=True)
-class TlogSample:
-    """One telemetry instant of a vehicle, in SI units and radians (course clockwise from north)."""
-
-    t_s: float
-    lat_deg: float
-    lon_deg: float
-    alt_m: float
-    relative_alt_m: float
-    v_north_m_s: float
-    v_east_m_s: float
-    course_rad: float
-    speed_m_s: float
-    roll_rad: float = 0.0
-    armed: bool = True
-    mode: str = "offboard"
+_log = logging.getLogger(__name__)
+_STAMP = struct.Struct(">Q")
 
 
 class TlogWriter:
-    """Writes one vehicle's .tlog; use as a context manager so the file is always closed."""
+    """One .tlog, appended packet by packet; a context manager so the file is always closed.
 
-    def __init__(self, path: Path, system_id: int, epoch_s: float) -> None:
-        self._path = path
-        self._epoch_s = epoch_s
+    Timestamps never go back in a log (a wall clock stepped back by NTP is held at the last
+    stamp), so a replay plays it in order.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
         self._file: BinaryIO | None = None
-        self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
+        self._last_us = 0
         self.records = 0
 
     def __enter__(self) -> Self:
-        self._path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = self._path.open("wb")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = self.path.open("wb")
         return self
 
     def __exit__(
@@ -60,74 +47,114 @@ class TlogWriter:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        self.close()
 
-    def write(self, sample: TlogSample) -> None:
-        """Append HEARTBEAT, GLOBAL_POSITION_INT, ATTITUDE and VFR_HUD for one sample."""
+    def close(self) -> None:
+        file, self._file = self._file, None
+        if file is not None:
+            file.close()
+
+    def write(self, t_unix_s: float, packet: bytes | memoryview) -> None:
+        """Append one packet received at ``t_unix_s`` (s since the Unix epoch)."""
         if self._file is None:
-            raise RuntimeError("TlogWriter used outside its context")
-        values = (sample.t_s, sample.lat_deg, sample.lon_deg, sample.alt_m, sample.speed_m_s)
-        if not all(math.isfinite(v) for v in values):
-            return  # a log never carries garbage; the mission counts bad telemetry elsewhere
-        boot_ms = int(sample.t_s * 1000.0) & 0xFFFFFFFF
-        heading_cdeg = round(math.degrees(sample.course_rad) % 360.0 * 100.0) % 36000
-        base_mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
-            mavlink.MAV_MODE_FLAG_SAFETY_ARMED if sample.armed else 0
-        )
-        messages = (
-            self._mav.heartbeat_encode(
-                mavlink.MAV_TYPE_FIXED_WING,
-                mavlink.MAV_AUTOPILOT_PX4,
-                base_mode,
-                PX4_CUSTOM_MODES.get(sample.mode, 0),
-                mavlink.MAV_STATE_ACTIVE,
-            ),
-            self._mav.global_position_int_encode(
-                boot_ms,
-                round(sample.lat_deg * 1e7),
-                round(sample.lon_deg * 1e7),
-                round(sample.alt_m * 1000.0),
-                round(sample.relative_alt_m * 1000.0),
-                round(sample.v_north_m_s * 100.0),
-                round(sample.v_east_m_s * 100.0),
-                0,
-                heading_cdeg,
-            ),
-            self._mav.attitude_encode(
-                boot_ms, sample.roll_rad, 0.0, sample.course_rad, 0.0, 0.0, 0.0
-            ),
-            self._mav.vfr_hud_encode(
-                sample.speed_m_s,
-                sample.speed_m_s,
-                heading_cdeg // 100,
-                50,
-                sample.alt_m,
-                0.0,
-            ),
-        )
-        stamp = struct.pack(">Q", int((self._epoch_s + sample.t_s) * 1e6))
-        for message in messages:
-            self._file.write(stamp + message.pack(self._mav))
-            self.records += 1
+            raise RuntimeError(f"TlogWriter {self.path} used outside its context")
+        if not math.isfinite(t_unix_s) or t_unix_s < 0.0:
+            raise ValueError(f"tlog timestamp must be finite and >= 0, got {t_unix_s!r}")
+        stamp_us = max(self._last_us, int(t_unix_s * 1e6))
+        self._last_us = stamp_us
+        self._file.write(_STAMP.pack(stamp_us))
+        self._file.write(packet)
+        self.records += 1
+
+    def flush(self) -> None:
+        if self._file is not None:
+            self._file.flush()
 
 
-async def record_tlog(link: VehicleLink, writer: TlogWriter) -> None:
-    """Write every telemetry frame of ``link`` to ``writer`` until the link closes."""
-    async for f in link.telemetry():
-        writer.write(
-            TlogSample(
-                f.t_s,
-                f.latitude_deg,
-                f.longitude_deg,
-                f.altitude_m,
-                f.relative_altitude_m,
-                f.ground_speed_m_s * math.cos(f.course_rad),
-                f.ground_speed_m_s * math.sin(f.course_rad),
-                f.course_rad,
-                f.ground_speed_m_s,
-                armed=f.armed,
-                mode=f.flight_mode.lower(),
+class TlogRecorder:
+    """The .tlogs of one run, one per vehicle system id, shared by every relay of the run.
+
+    ``paths``: system id -> its log's path; packets of other system ids are not recorded.
+    A log that cannot be written (disk full, folder gone) is closed with one logged error and
+    the others go on: a flight log never stops a mission.
+    """
+
+    def __init__(self, paths: dict[int, Path]) -> None:
+        self._paths = dict(paths)
+        self._writers: dict[int, TlogWriter] = {}
+        self._failed: set[int] = set()
+        self._open = False
+
+    @classmethod
+    def for_vehicles(
+        cls,
+        out_dir: Path,
+        system_ids: Iterable[int],
+        name: Callable[[int], str] = lambda sysid: f"vehicle-{sysid}.tlog",
+    ) -> TlogRecorder:
+        return cls({s: out_dir / name(s) for s in system_ids})
+
+    @property
+    def system_ids(self) -> frozenset[int]:
+        return frozenset(self._paths)
+
+    def __enter__(self) -> Self:
+        self._open = True
+        for system_id, path in self._paths.items():
+            writer = TlogWriter(path)
+            try:
+                writer.__enter__()
+            except OSError as exc:
+                self._fail(system_id, exc)
+                continue
+            self._writers[system_id] = writer
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._open = False
+        writers, self._writers = self._writers, {}
+        for system_id, writer in writers.items():
+            try:
+                writer.close()
+            except OSError as error:
+                self._fail(system_id, error)
+
+    def records(self, system_id: int) -> int:
+        writer = self._writers.get(system_id)
+        return writer.records if writer is not None else 0
+
+    def write(self, system_id: int, t_unix_s: float, packet: bytes | memoryview) -> None:
+        """Append a packet to ``system_id``'s log (ignored for a system id without a log)."""
+        writer = self._writers.get(system_id)
+        if writer is None:
+            return
+        try:
+            writer.write(t_unix_s, packet)
+        except OSError as exc:
+            del self._writers[system_id]
+            with contextlib.suppress(OSError):
+                writer.close()
+            self._fail(system_id, exc)
+
+    def flush(self) -> None:
+        for system_id, writer in list(self._writers.items()):
+            try:
+                writer.flush()
+            except OSError as exc:
+                del self._writers[system_id]
+                self._fail(system_id, exc)
+
+    def _fail(self, system_id: int, exc: OSError) -> None:
+        if system_id not in self._failed:
+            self._failed.add(system_id)
+            _log.error(
+                "vehicle %d: flight log %s not recorded from here on: %s",
+                system_id,
+                self._paths[system_id],
+                exc,
             )
-        )

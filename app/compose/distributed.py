@@ -42,9 +42,9 @@ from app.compose.parts import (
     bring_up,
     clock_rate,
     counters_of,
+    gcs_endpoint,
     ground_station,
     open_links,
-    recording_tlogs,
     vehicle_agent,
     write_outputs,
 )
@@ -674,10 +674,17 @@ class _Flight:
         mission_clock = DeferredMissionClock()
         async with AsyncExitStack() as stack:
             links = await stack.enter_async_context(
-                open_links(plan, [url], [i], builtin, mission_clock)
+                open_links(
+                    plan,
+                    [url],
+                    [i],
+                    builtin,
+                    mission_clock,
+                    out_dir=out_dir,  # the vehicle's traffic into its .tlog, through a relay
+                    gcs=gcs_endpoint(plan),
+                )
             )
             link = self._link = links[i]
-            await stack.enter_async_context(recording_tlogs(links, out_dir, self._clock))
             self._notify(f"agent {i}: waiting for the ground station's mission epoch")
             epoch = await wait_for_epoch(self._epochs, self._clock)
             mission_clock.set(epoch)

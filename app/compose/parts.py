@@ -158,10 +158,17 @@ async def _relayed(
             "%s is flown directly: the relay (flight log, ground station) takes UDP only", url
         )
         return url
-    # vehicle i's own ground-station port when each connection is one vehicle
-    index = vehicles[k] if len(urls) == len(vehicles) else k
+    # each connection one vehicle: vehicle i's own ground-station port, and its system id
+    one_each = len(urls) == len(vehicles)
     relay = await stack.enter_async_context(
-        MavlinkRelay(endpoint, recorder=recorder, gcs=gcs, gcs_index=index, name=f"relay {url}")
+        MavlinkRelay(
+            endpoint,
+            recorder=recorder,
+            gcs=gcs,
+            gcs_index=vehicles[k] if one_each else k,
+            system_ids=frozenset({vehicles[k] + 1}) if one_each else frozenset(),
+            name=f"relay {url}",
+        )
     )
     if notify is not None:
         notify(f"  {relay.describe()}")

@@ -9,8 +9,9 @@ Angles are degrees in the file.
 import math
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
+from app.adapters.vehicle.mavsdk.urls import parse_gcs_endpoint
 from app.config.schema import (
     Finite,
     GuidanceConfig,
@@ -22,6 +23,7 @@ from app.config.schema import (
     TargetConfig,
 )
 from app.config.simulator import CameraModel, OriginConfig, WindModel
+from app.errors import ConfigError
 
 Count = Annotated[int, Field(ge=1, le=50)]
 
@@ -122,6 +124,12 @@ class LinkSettings(StrictModel):
     (None: the envelope's min speed), within ``handover_timeout_s`` of its take-off.
     ``clock_window_s``: the window (mission s) over which each vehicle's boot-clock offset is the
     least host-minus-boot time.
+    ``gcs_forward``: where a ground station (QGroundControl, MAVProxy) beside the app sees
+    every vehicle, through the relay that records the .tlogs: ``udpout:HOST:PORT`` (sent
+    there, as PX4 SITL sends to QGroundControl's 14550), ``udpin:HOST:PORT`` (vehicle i
+    listened for on PORT+i), or ``off`` (docs/vehicle-link.md).
+    ``camera_component_id``: the MAVLink component whose CAMERA_TRACKING_GEO_STATUS the links
+    take (the built-in simulator's cameras send from it).
     """
 
     connect: list[str] = Field(default_factory=list)
@@ -135,6 +143,18 @@ class LinkSettings(StrictModel):
     handover_min_airspeed_m_s: Positive | None = None
     handover_timeout_s: Positive = 120.0
     clock_window_s: Positive = 10.0
+    gcs_forward: str = "udpout:127.0.0.1:14550"
+    camera_component_id: Annotated[int, Field(ge=1, le=255)] = 100  # MAV_COMP_ID_CAMERA
+
+    @field_validator("gcs_forward")
+    @classmethod
+    def _gcs_endpoint(cls, value: str) -> str:
+        if value.strip() in ("", "off"):
+            return "off"
+        try:
+            return parse_gcs_endpoint(value).spec
+        except ConfigError as exc:
+            raise ValueError(str(exc)) from exc
 
     def vehicle_altitude_m(self, vehicle: int) -> float:
         """Vehicle ``vehicle``'s (0-based) altitude above home (m)."""

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Final
+from dataclasses import dataclass
+from typing import Final, Literal
 from urllib.parse import urlsplit
 
 from app.errors import ConfigError
@@ -34,3 +35,69 @@ def validate_url(url: str) -> str:
     if not 1 <= port <= 65535:
         raise ConfigError(f"vehicle URL {url!r}: port must be in 1..65535 (MAVSDK refuses 0)")
     return url
+
+
+@dataclass(frozen=True, slots=True)
+class UdpEndpoint:
+    """A UDP MAVLink endpoint: ``udpin`` listens on ``host:port`` and answers whoever sends to
+    it; ``udpout`` sends to ``host:port`` (from a port of its own) and hears the answers."""
+
+    mode: Literal["udpin", "udpout"]
+    host: str
+    port: int
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("udpin", "udpout"):
+            raise ConfigError(f"UDP endpoint mode must be udpin or udpout, got {self.mode!r}")
+        if not self.host:
+            raise ConfigError("UDP endpoint needs a host")
+        if not 1 <= self.port <= 65535:
+            raise ConfigError(f"UDP endpoint port must be in 1..65535, got {self.port}")
+
+    def shifted(self, by: int) -> UdpEndpoint:
+        """The same endpoint ``by`` ports up (vehicle i's own port of a ``udpin`` base)."""
+        return UdpEndpoint(self.mode, self.host, self.port + by)
+
+    @property
+    def url(self) -> str:
+        """As MAVSDK writes it (``udpin://host:port``)."""
+        return f"{self.mode}://{self.host}:{self.port}"
+
+    @property
+    def spec(self) -> str:
+        """As MAVProxy and mavlink-router write it (``udpout:host:port``)."""
+        return f"{self.mode}:{self.host}:{self.port}"
+
+
+def udp_endpoint_of_url(url: str) -> UdpEndpoint | None:
+    """The UDP endpoint of a MAVSDK URL (``validate_url``); None for TCP and serial URLs."""
+    parts = urlsplit(validate_url(url))
+    if parts.scheme not in ("udpin", "udpout"):
+        return None
+    assert parts.hostname is not None
+    assert parts.port is not None
+    mode: Literal["udpin", "udpout"] = "udpin" if parts.scheme == "udpin" else "udpout"
+    return UdpEndpoint(mode, parts.hostname, parts.port)
+
+
+def parse_gcs_endpoint(spec: str) -> UdpEndpoint:
+    """Where a ground station is served: ``udpout:HOST:PORT`` (sent to, as PX4 SITL sends to
+    QGroundControl's 14550), ``udpin:HOST:PORT`` (listened on; vehicle i on PORT+i), a MAVSDK
+    URL of either, or plain ``HOST:PORT`` (udpout). Raises ``ConfigError`` naming the value."""
+    text = spec.strip()
+    mode: Literal["udpin", "udpout"] = "udpout"
+    for prefix in ("udpin://", "udpout://", "udpin:", "udpout:"):
+        if text.startswith(prefix):
+            mode = "udpin" if prefix.startswith("udpin") else "udpout"
+            text = text[len(prefix) :]
+            break
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise ConfigError(
+            f"ground station endpoint {spec!r}: expected HOST:PORT, udpout:HOST:PORT or "
+            "udpin:HOST:PORT (e.g. udpout:127.0.0.1:14550)"
+        )
+    try:
+        return UdpEndpoint(mode, host.strip("[]"), int(port))
+    except ConfigError as exc:
+        raise ConfigError(f"ground station endpoint {spec!r}: {exc}") from exc

@@ -1,0 +1,123 @@
+"""MAVLink packets found in a datagram by their headers alone: where each starts and ends, who
+sent it, and which system it is addressed to (no payload decoding, no CRC check).
+
+This is what a router needs to pass traffic on and record it: the relay (``relay``) forwards
+bytes as they came and writes each packet to its vehicle's .tlog. A MAVLink 1 packet is
+``0xFE len seq sysid compid msgid payload crc(2)``; a MAVLink 2 packet is ``0xFD len incompat
+compat seq sysid compid msgid(3) payload crc(2) [signature(13)]`` with the payload's trailing
+zeros cut (so a target field past the cut is 0). Bytes that are not a packet are skipped to the
+next start byte and counted.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Final
+
+from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+MAGIC_V1: Final = 0xFE
+MAGIC_V2: Final = 0xFD
+HEADER_V1: Final = 6
+HEADER_V2: Final = 10
+CRC_LEN: Final = 2
+SIGNATURE_LEN: Final = 13
+INCOMPAT_SIGNED: Final = 0x01
+
+
+def _target_offsets() -> dict[int, int]:
+    """Message id -> byte offset of ``target_system`` in the payload (wire order), for every
+    message of the ardupilotmega dialect (a superset of common) that has one."""
+    offsets: dict[int, int] = {}
+    for msg_id, cls in dialect.mavlink_map.items():
+        names = list(cls.ordered_fieldnames)
+        if "target_system" not in names:
+            continue
+        formats = cls.native_format.decode("ascii")[1:]  # past '<'
+        offset = 0
+        for name, fmt, length in zip(names, formats, cls.array_lengths, strict=True):
+            if name == "target_system":
+                offsets[msg_id] = offset
+                break
+            offset += struct.calcsize("<" + fmt) * max(1, length)
+    return offsets
+
+
+#: where ``target_system`` sits in each addressed message's payload
+TARGET_OFFSETS: Final = _target_offsets()
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    """One MAVLink packet of a datagram: ``data[start:end]``; ``target_system`` 0 when the
+    message is broadcast or has no target."""
+
+    start: int
+    end: int
+    system_id: int
+    component_id: int
+    msg_id: int
+    target_system: int
+
+
+def split_packets(data: bytes) -> tuple[list[Packet], int]:
+    """The whole packets in ``data``, and how many bytes were skipped (garbage, or a packet cut
+    short at the end)."""
+    packets: list[Packet] = []
+    skipped = 0
+    i, n = 0, len(data)
+    while i < n:
+        magic = data[i]
+        if magic == MAGIC_V2 and i + HEADER_V2 <= n:
+            length = data[i + 1]
+            end = i + HEADER_V2 + length + CRC_LEN
+            if data[i + 2] & INCOMPAT_SIGNED:
+                end += SIGNATURE_LEN
+            if end <= n:
+                msg_id = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+                payload = i + HEADER_V2
+                packets.append(
+                    Packet(
+                        i,
+                        end,
+                        data[i + 5],
+                        data[i + 6],
+                        msg_id,
+                        _target(data, payload, length, msg_id),
+                    )
+                )
+                i = end
+                continue
+        elif magic == MAGIC_V1 and i + HEADER_V1 <= n:
+            length = data[i + 1]
+            end = i + HEADER_V1 + length + CRC_LEN
+            if end <= n:
+                msg_id = data[i + 5]
+                payload = i + HEADER_V1
+                packets.append(
+                    Packet(
+                        i,
+                        end,
+                        data[i + 3],
+                        data[i + 4],
+                        msg_id,
+                        _target(data, payload, length, msg_id),
+                    )
+                )
+                i = end
+                continue
+        # not a packet here (or one cut short): on to the next start byte
+        j = i + 1
+        while j < n and data[j] not in (MAGIC_V1, MAGIC_V2):
+            j += 1
+        skipped += j - i
+        i = j
+    return packets, skipped
+
+
+def _target(data: bytes, payload: int, length: int, msg_id: int) -> int:
+    offset = TARGET_OFFSETS.get(msg_id)
+    if offset is None or offset >= length:
+        return 0  # no target field, or cut off with the payload's trailing zeros
+    return data[payload + offset]
