@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from app.config.loading import load_config
     from app.errors import InputError
     from app.report import replay as rp
-    from app.report.run_folder import SUMMARY_FILE, read_json, read_run_config
+    from app.report.run_folder import SUMMARY_FILE, read_json, read_run_config, run_title
 
     run_dir: Path = args.run_dir
     if not run_dir.is_dir():
@@ -103,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
         from app.report.mission_plots import plot_mission
 
         written = plot_mission(
-            result.samples, plan.config.radius_m, args.plots, title=f"{run_dir.name}, replayed"
+            result.samples,
+            plan.config.radius_m,
+            args.plots,
+            title=f"{run_title(run_dir, mission.name)}, replayed",
         )
         print("figures: " + ", ".join(str(p) for p in written))
     return 0

@@ -1,9 +1,15 @@
 """PNG figures of a mission run like the paper's Figs 20-22: trajectories, distance error and
-phase difference, one panel per part of the run (gather, adjust, and track per target segment).
+phase difference, one panel per part of the run (gather, adjust, and track per target segment),
+each figure headed by the run's name and what it draws.
+
+The phase difference is drawn as the spacing error, the gap to the next vehicle (counter-
+clockwise) minus 360 / n, wrapped into (-180, 180] degrees: 0 when the team is evenly spaced,
+never jumping between 0 and 360 as the raw gap does when two vehicles pass each other; where
+the wrapped value still jumps (a gap of 360 / n +- 180) the line is broken, not drawn across.
 """
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -12,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.patches import Circle
 
+from app.core.frames import wrap_pi
 from app.core.mission.team import TeamSample
 from app.report.summary import phase_key
 
@@ -35,8 +42,33 @@ def _title(key: str) -> str:
     return PART_TITLES.get(key, key.replace("track:", "track, target "))
 
 
-def plot_mission(samples: Sequence[TeamSample], radius_m: float, out_dir: Path) -> list[Path]:
-    """Write trajectories.png, distance_error.png and phase_difference.png; return their paths."""
+def spacing_error_deg(sample: TeamSample) -> dict[int, float]:
+    """Each active vehicle's gap to its counter-clockwise neighbour minus 360 / n, in
+    (-180, 180] degrees."""
+    return {k: -math.degrees(wrap_pi(-e)) for k, e in sample.spacing_errors().items()}
+
+
+def broken_at_wraps(
+    points: Sequence[tuple[float, float]], jump: float = 180.0
+) -> tuple[list[float], list[float]]:
+    """The (t, value) points as two lists, with a NaN between two neighbours whose values differ
+    by more than ``jump`` (matplotlib leaves a gap there instead of a vertical line)."""
+    ts: list[float] = []
+    values: list[float] = []
+    for t, value in points:
+        if values and abs(value - values[-1]) > jump:
+            ts.append(math.nan)
+            values.append(math.nan)
+        ts.append(t)
+        values.append(value)
+    return ts, values
+
+
+def plot_mission(
+    samples: Sequence[TeamSample], radius_m: float, out_dir: Path, *, title: str = ""
+) -> list[Path]:
+    """Write trajectories.png, distance_error.png and phase_difference.png; return their paths.
+    ``title`` (the run's name, say) heads each figure, before what it draws."""
     out_dir.mkdir(parents=True, exist_ok=True)
     parts = _parts(samples)
     if not parts:
@@ -76,23 +108,28 @@ def plot_mission(samples: Sequence[TeamSample], radius_m: float, out_dir: Path) 
     for ax in list(axes.flat)[len(parts) :]:
         ax.axis("off")
     axes.flat[0].legend(loc="best", fontsize=8)
+    fig.suptitle(_heading(title, f"trajectories about the target (circle: r_d = {radius_m:g} m)"))
     fig.tight_layout()
     path = out_dir / "trajectories.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     written.append(path)
 
-    for name, ylabel, series in (
-        ("distance_error", "distance error r - r_d (m)", lambda s: s.distance_errors(radius_m)),
+    figures: tuple[tuple[str, str, str, Callable[[TeamSample], dict[int, float]]], ...] = (
+        (
+            "distance_error",
+            "distance error r - r_d (m)",
+            "distance to the circle, r - r_d",
+            lambda s: s.distance_errors(radius_m),
+        ),
         (
             "phase_difference",
-            "phase difference to next UAV (deg)",
-            lambda s: {
-                k: math.degrees(e) + 360.0 / max(1, sum(v.active for v in s.vehicles))
-                for k, e in s.spacing_errors().items()
-            },
+            "gap to next UAV - 360/n (deg)",
+            "phase spacing error: gap to the next UAV minus 360/n, in (-180, 180]",
+            spacing_error_deg,
         ),
-    ):
+    )
+    for name, ylabel, what, series in figures:
         fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.4 * rows), squeeze=False)
         for ax, (key, group) in zip(axes.flat, parts.items(), strict=False):
             for vehicle in vehicles:
@@ -100,12 +137,12 @@ def plot_mission(samples: Sequence[TeamSample], radius_m: float, out_dir: Path) 
                     (s.t_s, value) for s in group for k, value in series(s).items() if k == vehicle
                 ]
                 if pts:
-                    ax.plot(*zip(*pts, strict=True), lw=1, label=f"UAV {vehicle + 1}")
-            if name == "distance_error":
-                ax.axhline(0.0, color="grey", lw=0.8)
-            else:
-                active = max(1, sum(v.active for v in group[-1].vehicles))
-                ax.axhline(360.0 / active, color="grey", lw=0.8, ls="--")
+                    # a part of a few samples (an adjust that lasts a tick) shows as dots
+                    marker = "o" if len(pts) < 10 else None
+                    ax.plot(
+                        *broken_at_wraps(pts), lw=1, ms=3, marker=marker, label=f"UAV {vehicle + 1}"
+                    )
+            ax.axhline(0.0, color="grey", lw=0.8)
             ax.set_title(_title(key))
             ax.set_xlabel("time (s)")
             ax.set_ylabel(ylabel)
@@ -113,9 +150,14 @@ def plot_mission(samples: Sequence[TeamSample], radius_m: float, out_dir: Path) 
         for ax in list(axes.flat)[len(parts) :]:
             ax.axis("off")
         axes.flat[0].legend(loc="best", fontsize=8)
+        fig.suptitle(_heading(title, what))
         fig.tight_layout()
         path = out_dir / f"{name}.png"
         fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
     return written
+
+
+def _heading(title: str, what: str) -> str:
+    return f"{title}: {what}" if title else what

@@ -42,8 +42,8 @@ def write_run_folder(
     title: str = "",
 ) -> dict[str, Any]:
     """Score ``samples`` (``summarize``), add ``extra`` (the run's own figures: counters, times),
-    write the folder and return the summary. The figures (matplotlib, headed ``title``: the
-    folder's name when empty) only when there are samples."""
+    write the folder and return the summary. The figures (matplotlib, headed ``title``, else
+    ``run_title``) only when there are samples."""
     summary = summarize(
         samples, radius_m, tracking_command_s, radius_tolerance_m, spacing_tolerance_rad
     )
@@ -74,8 +74,16 @@ def write_run_folder(
     if samples:
         from app.report.mission_plots import plot_mission  # matplotlib: 0.45 s, at the end only
 
-        plot_mission(samples, radius_m, out_dir, title=title or out_dir.name)
+        mission = extra.get("mission")
+        name = title or run_title(out_dir, mission if isinstance(mission, str) else "")
+        plot_mission(samples, radius_m, out_dir, title=name)
     return summary
+
+
+def run_title(run_dir: Path, mission: str) -> str:
+    """What heads a run's figures: the folder's name, and the mission's when it is not in it."""
+    name = run_dir.resolve().name
+    return name if not mission or mission in name else f"{name} ({mission})"
 
 
 def write_run_config(out_dir: Path, config: "MissionConfig") -> Path:

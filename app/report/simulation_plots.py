@@ -15,6 +15,7 @@ import numpy as np
 
 from app.core.mission.stage import adjacent_phase_differences
 from app.core.sampled_run import SimulationResult
+from app.report.mission_plots import broken_at_wraps
 
 _COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 
@@ -86,9 +87,10 @@ def plot_phase(result: SimulationResult, path: str | Path, title: str) -> Path:
         ax_v.plot(result.t_s, result.speed_m_s[:, i], color=colour, lw=1.2, label=f"UAV{i + 1}")
     gaps = np.degrees(adjacent_phase_differences(result.phases_rad()))
     for k in range(n):
-        ax_ph.plot(
-            result.t_s, gaps[:, k], color=_COLOURS[k % len(_COLOURS)], lw=1.2, label=f"gap {k + 1}"
-        )
+        # a gap passes from 360 to 0 when two vehicles pass each other: broken there, not drawn
+        # as a vertical line across the panel
+        t, gap = broken_at_wraps(list(zip(result.t_s.tolist(), gaps[:, k].tolist(), strict=True)))
+        ax_ph.plot(t, gap, color=_COLOURS[k % len(_COLOURS)], lw=1.2, label=f"gap {k + 1}")
     ideal = 360.0 / n
     ax_ph.axhspan(ideal - 2.0, ideal + 2.0, color="0.85", zorder=0)
     ax_xy.set_aspect("equal", adjustable="datalim")
