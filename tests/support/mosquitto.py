@@ -1,7 +1,10 @@
 """A real mosquitto broker on a free loopback port, for tests and benchmarks.
 
 Tests get one from the ``mosquitto`` fixture (``tests/conftest.py``); ``Mosquitto.restart()``
-brings it back on the same port.
+brings it back on the same port. ``Mosquitto(workdir, team=n)`` runs the shipped configuration
+instead (``app.adapters.bus.broker_setup``, as ``standoff broker`` writes it for a team of n:
+no anonymous clients, one password per login, the per-client ACL); ``login(identity)`` is a
+client's ``Login`` on it.
 """
 
 from __future__ import annotations
@@ -13,6 +16,9 @@ import socket
 import subprocess
 import time
 from pathlib import Path
+
+from app.adapters.bus import Login
+from app.adapters.bus.broker_setup import TeamFiles, conf_text, write_team
 
 START_TIMEOUT_S = 10.0
 
@@ -37,24 +43,45 @@ class Mosquitto:
     """One mosquitto process with a generated config in ``workdir``."""
 
     def __init__(
-        self, workdir: Path, *, extra_config: str = "", tls: bool = False, anonymous: bool = True
+        self,
+        workdir: Path,
+        *,
+        extra_config: str = "",
+        tls: bool = False,
+        anonymous: bool = True,
+        team: int | None = None,
     ) -> None:
         self.workdir = workdir
-        self.anonymous = anonymous
+        self.anonymous = anonymous and team is None
         self.extra_config = extra_config
         self.tls = tls
         self.port = free_port()
         self.process: subprocess.Popen[bytes] | None = None
         self.log_path = workdir / "mosquitto.log"
+        self.team: TeamFiles | None = None
+        if team is not None:
+            self.team = write_team(workdir / "broker", team, host="127.0.0.1")
+
+    def login(self, identity: str) -> Login:
+        """The login of ``identity`` on this broker's team (``team=`` only)."""
+        if self.team is None:
+            raise RuntimeError("this broker takes anonymous clients: start it with team=n")
+        return Login(identity, self.team.password(identity))
 
     @property
     def url(self) -> str:
         return f"{'mqtts' if self.tls else 'mqtt'}://127.0.0.1:{self.port}"
 
     def config(self) -> str:
+        if self.team is not None:
+            head = conf_text(self.team.directory, port=self.port, host="127.0.0.1")
+        else:
+            head = (
+                f"listener {self.port} 127.0.0.1\n"
+                f"allow_anonymous {'true' if self.anonymous else 'false'}\n"
+            )
         return (
-            f"listener {self.port} 127.0.0.1\n"
-            f"allow_anonymous {'true' if self.anonymous else 'false'}\n"
+            f"{head}"
             "persistence false\n"
             # as root, mosquitto would drop to the "mosquitto" user, who cannot read tmp_path
             f"{'user root' if os.geteuid() == 0 else ''}\n"

@@ -1,0 +1,486 @@
+"""Identity bound to topics: the rule (``topics.refusal``), both buses applying it on receipt,
+a client with an identity publishing only as itself, and the shipped mosquitto configuration
+(logins, per-client ACL) making a real broker refuse what a login may not publish."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+
+import aiomqtt
+import pytest
+
+from app.adapters.bus import DROP_REASONS, Bus, InProcessBroker, Login, MqttBus, encode, open_bus
+from app.adapters.bus.broker_setup import (
+    DEFAULT_DIR,
+    acl_text,
+    conf_text,
+    password_hash,
+    writable,
+    write_team,
+)
+from app.errors import BusError
+from app.runtime.ports import topics
+from app.runtime.ports.messages import (
+    Command,
+    GlobalEstimate,
+    LinkState,
+    LocalEstimate,
+    Message,
+    MissionEpoch,
+    MissionState,
+    TargetObservation,
+    VehicleStatus,
+)
+from app.runtime.ports.topics import Topic
+from tests.support.mosquitto import Mosquitto
+
+WAIT_S = 5.0
+EYE = tuple(tuple(float(i == j) for j in range(6)) for i in range(6))
+SHIPPED = Path(__file__).resolve().parents[2] / "configs" / "mosquitto"
+
+
+def status(sender: str, vehicle: int, t_s: float = 1.0) -> VehicleStatus:
+    return VehicleStatus(
+        sender=sender,
+        t_s=t_s,
+        vehicle=vehicle,
+        east_m=10.0,
+        north_m=-20.0,
+        alt_m=100.0,
+        course_rad=1.0,
+        speed_m_s=14.0,
+        phase_rad=0.5,
+        stage="track",
+        link="ok",
+        healthy=True,
+    )
+
+
+def observation(sender: str, vehicle: int | None) -> TargetObservation:
+    return TargetObservation(
+        sender=sender, t_s=1.0, sensor="cam", vehicle=vehicle, east_m=500.0, north_m=0.0, sigma_m=1
+    )
+
+
+def local(sender: str, vehicle: int) -> LocalEstimate:
+    return LocalEstimate(sender=sender, t_s=1.0, vehicle=vehicle, x=(500.0,) * 6, P=EYE)
+
+
+def fused(sender: str) -> GlobalEstimate:
+    return GlobalEstimate(sender=sender, t_s=1.0, x=(500.0,) * 6, P=EYE, beta={})
+
+
+def mission(sender: str) -> MissionState:
+    return MissionState(sender=sender, t_s=1.0, stage="track", active=(0,), spacing_rad=math.pi)
+
+
+def command(sender: str, vehicles: tuple[int, ...] | None = None) -> Command:
+    return Command(sender=sender, t_s=1.0, command="shutdown", vehicles=vehicles)
+
+
+def presence(sender: str, vehicle: int | None) -> LinkState:
+    return LinkState(sender=sender, t_s=1.0, online=False, vehicle=vehicle)
+
+
+def epoch(sender: str) -> MissionEpoch:
+    return MissionEpoch(sender=sender, t_s=0.0, epoch_s=1.0e9)
+
+
+# (topic, message, why it is refused or None)
+RULE_CASES: list[tuple[Topic | str, Message, str | None]] = [
+    (topics.status(0), status("agent-0", 0), None),
+    (topics.status(0), status("agent-1", 0), "wrong_sender"),  # agent-1 speaking for vehicle 0
+    (topics.status(1), status("agent-1", 0), "wrong_vehicle"),  # a status about another vehicle
+    (topics.status(0), status("ground", 0), "wrong_sender"),
+    (topics.status(0), mission("ground"), "wrong_kind"),
+    (topics.local_estimate(2), local("agent-2", 2), None),
+    (topics.local_estimate(2), local("agent-0", 0), "wrong_sender"),
+    (topics.local_estimate(2), local("agent-2", 0), "wrong_vehicle"),
+    (topics.local_estimate(0), local("ground", 0), "wrong_sender"),
+    (topics.observation(2), observation("ground", 2), None),
+    (topics.observation(2), observation("agent-2", 2), None),
+    (topics.observation(2), observation("agent-1", 2), "wrong_sender"),
+    (topics.observation(2), observation("ground", 1), "wrong_vehicle"),
+    (topics.observation(2), observation("ground", None), "wrong_vehicle"),
+    (topics.observation(0), observation("tracker", 0), "wrong_sender"),
+    (topics.GLOBAL_ESTIMATE, fused("ground"), None),
+    (topics.GLOBAL_ESTIMATE, fused("agent-0"), "wrong_sender"),
+    (topics.MISSION, mission("ground"), None),
+    (topics.MISSION, mission("agent-1"), "wrong_sender"),
+    (topics.MISSION_EPOCH, epoch("ground"), None),
+    (topics.MISSION_EPOCH, epoch("agent-1"), "wrong_sender"),
+    (topics.command(), command("ground"), None),
+    (topics.command(), command("operator"), None),  # standoff fly's operator console
+    (topics.command(), command("agent-1"), "wrong_sender"),
+    (topics.command(1), command("ground", (1,)), None),
+    (topics.command(1), command("ground"), "wrong_vehicle"),  # on command/1, for everyone
+    (topics.command(1), command("ground", (0,)), "wrong_vehicle"),
+    (topics.command(1), command("agent-1", (1,)), "wrong_sender"),
+    (topics.link(1), presence("agent-1", 1), None),
+    (topics.link(1), presence("agent-1", None), "wrong_vehicle"),
+    (topics.link(1), presence("agent-0", 1), "wrong_sender"),
+    (topics.link("ground"), presence("ground", None), None),
+    (topics.link("ground"), presence("agent-0", None), "wrong_sender"),
+    ("standoff/v1/status/01", status("agent-1", 1), "unknown_topic"),  # not canonical
+    ("standoff/v1/status/255", status("agent-1", 1), "unknown_topic"),  # no such vehicle
+    ("standoff/v1/status/ground", status("agent-1", 1), "unknown_topic"),
+    ("standoff/v1/elsewhere", mission("ground"), "unknown_topic"),
+    ("standoff/v1", mission("ground"), "unknown_topic"),
+    ("tracker/fixes", observation("tracker", None), None),  # another program's topic
+    ("standoff/v2/mission", mission("agent-1"), None),  # another layout: not this mission's
+]
+
+
+@pytest.mark.parametrize(("topic", "message", "reason"), RULE_CASES)
+def test_the_rule_binds_sender_kind_and_vehicle_to_the_topic(
+    topic: Topic | str, message: Message, reason: str | None
+) -> None:
+    assert topics.refusal(topic, message) == reason
+
+
+def test_identities_and_their_vehicles() -> None:
+    assert topics.agent(0) == "agent-0"
+    assert topics.vehicle_of("agent-17") == 17
+    for name in ("ground", "agent-", "agent-01", "agent-255", "agent-x", "agent-+1", "agent-1.0"):
+        assert topics.vehicle_of(name) is None, name
+    with pytest.raises(topics.TopicError):
+        topics.agent(255)
+    assert topics.may_publish("agent-1", topics.status(1))
+    assert not topics.may_publish("agent-1", topics.status(0))
+    assert not topics.may_publish("agent-1", topics.command())
+    assert topics.may_publish("ground", topics.command())
+    assert topics.may_publish("agent-1", "tracker/fixes")
+
+
+# --- both buses ------------------------------------------------------------------------------
+
+
+@pytest.fixture(params=["inproc", "mqtt"])
+async def pair(request: pytest.FixtureRequest) -> AsyncIterator[tuple[Bus, Bus]]:
+    """A publisher with no identity (it can forge) and a receiver, on one bus kind."""
+    if request.param == "inproc":
+        broker = InProcessBroker()
+        async with (
+            open_bus(None, broker=broker, client_id="forger") as pub,
+            open_bus(None, broker=broker, client_id="receiver") as sub,
+        ):
+            yield pub, sub
+        return
+    mosquitto: Mosquitto = request.getfixturevalue("mosquitto")
+    async with (
+        open_bus(mosquitto.url, client_id="forger", connect_timeout_s=WAIT_S) as pub,
+        open_bus(mosquitto.url, client_id="receiver", connect_timeout_s=WAIT_S) as sub,
+    ):
+        yield pub, sub
+
+
+async def test_both_buses_drop_what_the_topic_does_not_permit_and_count_why(
+    pair: tuple[Bus, Bus], caplog: pytest.LogCaptureFixture
+) -> None:
+    pub, receiver = pair
+    forged = [(t, m, r) for t, m, r in RULE_CASES if r is not None and str(t).startswith("stand")]
+    good = [(Topic(str(t)), m) for t, m, r in RULE_CASES if r is None]
+    caplog.set_level(logging.WARNING, logger="app.adapters.bus.base")
+    async with receiver.subscribe("#") as everything:
+        for topic, message, _ in forged:
+            await pub.publish(topic, message)
+        for topic, message in good:
+            await pub.publish(topic, message)
+        got: list[tuple[Topic, Message]] = []
+        async with asyncio.timeout(WAIT_S):
+            while len(got) < len(good):
+                got.append(await anext(everything))
+        await asyncio.sleep(0.05)
+        assert everything.pending() == 0
+    assert got == good  # every forged one dropped, every good one delivered in order
+    expected = dict.fromkeys(DROP_REASONS, 0)
+    for _, _, reason in forged:
+        expected[str(reason)] += 1
+    assert receiver.drops == expected
+    assert receiver.stats.refused == len(forged)
+    assert receiver.stats.malformed == 0
+    assert pub.drops == dict.fromkeys(DROP_REASONS, 0)  # it subscribed to nothing
+    # one line per (reason, sender, topic) so far
+    keys = {(r, m.sender, str(t)) for t, m, r in forged}
+    assert len([r for r in caplog.records if "not believed" in r.getMessage()]) == len(keys)
+
+
+async def test_a_flood_of_forgeries_is_counted_in_full_and_logged_rarely(
+    pair: tuple[Bus, Bus], caplog: pytest.LogCaptureFixture
+) -> None:
+    pub, receiver = pair
+    caplog.set_level(logging.WARNING, logger="app.adapters.bus.base")
+    async with receiver.subscribe(topics.ALL_COMMANDS) as commands:
+        for _ in range(120):
+            await pub.publish(topics.command(), command("agent-1"))  # shutdown, "from" agent-1
+        await pub.publish(topics.command(), command("ground"))
+        async with asyncio.timeout(WAIT_S):
+            _, message = await anext(commands)
+    assert message == command("ground")
+    assert receiver.drops["wrong_sender"] == 120
+    lines = [r.getMessage() for r in caplog.records if "not believed" in r.getMessage()]
+    assert len(lines) == 3  # the 1st, 10th and 100th
+    assert "100 so far" in lines[-1]
+    assert "'agent-1'" in lines[-1]
+    assert "standoff/v1/command/all" in lines[-1]
+
+
+async def test_a_client_with_an_identity_publishes_only_as_itself_on_its_topics() -> None:
+    broker = InProcessBroker()
+    async with (
+        open_bus(None, broker=broker, client_id="agent-1", identity="agent-1") as agent1,
+        open_bus(None, broker=broker, client_id="ground") as ground,
+        ground.subscribe(topics.ALL) as sub,
+    ):
+        await agent1.publish(topics.status(1), status("agent-1", 1))
+        refused = [
+            (topics.status(0), status("agent-0", 0)),  # as another agent
+            (topics.status(0), status("agent-1", 0)),  # on another's topic
+            (topics.status(1), status("agent-1", 0)),  # about another vehicle
+            (topics.command(), command("ground")),  # as the ground
+            (topics.command(), command("agent-1")),  # on the ground's topic
+        ]
+        for topic, message in refused:
+            with pytest.raises(BusError, match="agent-1"):
+                await agent1.publish(topic, message)
+        async with asyncio.timeout(WAIT_S):
+            assert await anext(sub) == (topics.status(1), status("agent-1", 1))
+        assert sub.pending() == 0
+        assert agent1.stats.published == 1
+
+
+def test_an_mqtt_bus_logs_in_as_its_identity() -> None:
+    bus = MqttBus("mqtt://127.0.0.1:1883", client_id="agent-1", login=Login("agent-1", "pw"))
+    assert bus.identity == "agent-1"
+    assert bus.url.username == "agent-1"
+    assert "pw" not in repr(bus)
+    assert "pw" not in str(bus.url)
+    with pytest.raises(BusError, match="names user 'ground'"):
+        MqttBus("mqtt://ground:x@127.0.0.1:1883", login=Login("agent-1", "pw"))
+
+
+def test_a_login_reads_its_password_from_a_file_or_the_environment(tmp_path: Path) -> None:
+    secret = tmp_path / "agent-1.password"
+    secret.write_text("s3cret\n", encoding="utf-8")
+    assert Login.load("agent-1", password_file=secret).password == "s3cret"
+    env = {"STANDOFF_BUS_PASSWORD": "from-env"}
+    login = Login.load("agent-1", password_env="STANDOFF_BUS_PASSWORD", environ=env)
+    assert login.password == "from-env"
+    assert "from-env" not in repr(login)
+    (tmp_path / "empty").write_text("\n", encoding="utf-8")
+    for kwargs, reason in [
+        ({"password_file": tmp_path / "missing"}, "cannot read"),
+        ({"password_file": tmp_path / "empty"}, "is empty"),
+        ({"password_env": "NOT_SET_ANYWHERE"}, "NOT_SET_ANYWHERE"),
+        ({"password_file": secret, "password_env": "X"}, "not both"),
+    ]:
+        with pytest.raises(BusError, match=reason):
+            Login.load("agent-1", environ={}, **kwargs)  # type: ignore[arg-type]
+
+
+# --- the shipped mosquitto configuration ----------------------------------------------------
+
+
+def test_the_shipped_files_are_what_standoff_broker_writes_for_three() -> None:
+    assert (SHIPPED / "acl").read_text(encoding="utf-8") == acl_text(3)
+    assert (SHIPPED / "mosquitto.conf").read_text(encoding="utf-8") == conf_text(DEFAULT_DIR)
+    conf = (SHIPPED / "mosquitto.conf").read_text(encoding="utf-8")
+    assert "allow_anonymous false" in conf
+    assert "acl_file" in conf
+
+
+def test_the_acl_grants_each_login_what_the_rule_permits() -> None:
+    """Every topic the ACL lets a login write, the app's rule lets it send on (and back)."""
+    team = ["ground", "agent-0", "agent-1", "agent-2", "observer"]
+    samples = [topics.status(v) for v in range(3)]
+    samples += [topics.link(v) for v in range(3)] + [topics.link("ground")]
+    samples += [topics.local_estimate(v) for v in range(3)]
+    samples += [topics.observation(v) for v in range(3)] + [topics.command(v) for v in range(3)]
+    samples += [topics.command(), topics.GLOBAL_ESTIMATE, topics.MISSION, topics.MISSION_EPOCH]
+    for who in team:
+        grants = [topics.TopicFilter(f) for f in writable(who)]
+        for topic in samples:
+            assert any(g.matches(topic) for g in grants) == (
+                who != "observer" and topics.may_publish(who, topic)
+            ), (who, topic)
+
+
+def test_the_password_file_uses_mosquittos_hash() -> None:
+    line = password_hash("s3cret", salt=bytes(12))
+    assert line.startswith("$7$101$AAAAAAAAAAAAAAAA$")
+    assert password_hash("s3cret") != password_hash("s3cret")  # salted
+
+
+@pytest.fixture
+def team_broker(tmp_path: Path) -> Iterator[Mosquitto]:
+    """mosquitto on the shipped configuration, for a team of three."""
+    broker = Mosquitto(tmp_path, team=3)
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
+
+
+def raw_client(broker: Mosquitto, identity: str, **kwargs: object) -> aiomqtt.Client:
+    login = broker.login(identity)
+    return aiomqtt.Client(
+        "127.0.0.1",
+        broker.port,
+        identifier=f"raw-{identity}",
+        username=login.username,
+        password=login.password,
+        protocol=aiomqtt.ProtocolVersion.V5,
+        **kwargs,  # type: ignore[arg-type]
+    )
+
+
+def attacks_of_agent_1() -> list[tuple[Topic, Message]]:
+    """A well-formed message on every topic of another vehicle and of the ground, each
+    claiming to come from the topic's owner."""
+    out: list[tuple[Topic, Message]] = []
+    for v in (0, 2):
+        owner = f"agent-{v}"
+        out += [
+            (topics.status(v), status(owner, v, t_s=10_000.0)),
+            (topics.link(v), presence(owner, v)),
+            (topics.local_estimate(v), local(owner, v)),
+            (topics.observation(v), observation(owner, v)),
+            (topics.command(v), command("ground", (v,))),
+        ]
+    out += [
+        (topics.GLOBAL_ESTIMATE, fused("ground")),
+        (topics.MISSION, mission("ground")),
+        (topics.MISSION_EPOCH, epoch("ground")),
+        (topics.command(), command("ground")),
+        (topics.link("ground"), presence("ground", None)),
+    ]
+    return out
+
+
+def own_of_agent_1() -> list[tuple[Topic, Message]]:
+    return [
+        (topics.status(1), status("agent-1", 1)),
+        (topics.link(1), presence("agent-1", 1)),
+        (topics.local_estimate(1), local("agent-1", 1)),
+        (topics.observation(1), observation("agent-1", 1)),
+    ]
+
+
+async def test_the_shipped_broker_refuses_agent_1_anything_but_its_own_topics(
+    team_broker: Mosquitto,
+) -> None:
+    """Logged in as agent-1, a client publishes (QoS 0 and 1, retained too) on every topic of
+    vehicles 0 and 2 and of the ground: a subscriber to everything (a raw MQTT client, so that
+    the app's own rule cannot hide what the broker let through) receives none of it, nor any
+    retained copy later; what agent-1 publishes on its own topics arrives."""
+    attacks, own = attacks_of_agent_1(), own_of_agent_1()
+    received: list[str] = []
+    own_arrived = asyncio.Event()
+    async with raw_client(team_broker, "observer") as observer:
+        await observer.subscribe(f"{topics.ROOT}/#", qos=1)
+
+        async def listen() -> None:
+            async for message in observer.messages:
+                received.append(str(message.topic))
+                if len(received) >= len(own):
+                    own_arrived.set()
+
+        async with asyncio.TaskGroup() as tg:
+            listener = tg.create_task(listen())
+            async with raw_client(team_broker, "agent-1") as agent1:
+                for qos in (0, 1):
+                    for topic, message in attacks:
+                        await agent1.publish(topic.value, encode(message), qos=qos, retain=True)
+                for topic, message in own:
+                    await agent1.publish(topic.value, encode(message), qos=1)
+            async with asyncio.timeout(WAIT_S):
+                await own_arrived.wait()
+            await asyncio.sleep(0.3)  # anything the broker let through would be here by now
+            listener.cancel()
+    print("\nagent-1 on the shipped broker (topic: what a subscriber to everything got):")
+    for topic, _ in attacks:
+        print(f"  {topic.value:38} refused: {received.count(topic.value)} of 2 delivered")
+    for topic, _ in own:
+        print(f"  {topic.value:38} own:     {received.count(topic.value)} of 1 delivered")
+    assert sorted(received) == sorted(t.value for t, _ in own)
+    # nothing of it was retained either: a later subscriber gets no retained message
+    later: list[str] = []
+    async with raw_client(team_broker, "ground") as ground:
+        await ground.subscribe(f"{topics.ROOT}/#", qos=1)
+        try:
+            async with asyncio.timeout(0.5):
+                async for packet in ground.messages:
+                    later.append(str(packet.topic))
+        except TimeoutError:
+            pass
+    assert later == []
+
+
+async def test_a_refused_publish_is_counted_and_the_app_drops_forgeries_the_broker_passes(
+    team_broker: Mosquitto,
+) -> None:
+    """The bus counts the broker's refusals of its QoS 1 publishes (MQTT 5 PUBACK 'not
+    authorized'); and a login the ACL lets write a topic (the ground, on obs/0) still cannot
+    make the agents believe a message it puts there under another's name."""
+    async with (
+        open_bus(
+            team_broker.url,
+            client_id="agent-1",
+            login=team_broker.login("agent-1"),
+            connect_timeout_s=WAIT_S,
+        ) as agent1,
+        open_bus(
+            team_broker.url,
+            client_id="agent-0",
+            login=team_broker.login("agent-0"),
+            connect_timeout_s=WAIT_S,
+        ) as agent0,
+        agent0.subscribe(topics.ALL_COMMANDS) as commands,
+        agent0.subscribe(topics.observation(0)) as observations,
+        raw_client(team_broker, "ground") as ground,
+    ):
+        assert isinstance(agent1, MqttBus)
+        agent1.identity = None  # a buggy or hostile client: no check of its own
+        await agent1.publish(topics.command(), command("ground"), qos=1)
+        await agent1.publish(topics.status(0), status("agent-0", 0), qos=1)
+        assert agent1.stats.denied == 2
+        # the ground may write obs/0, but not as agent-1 (nor for vehicle 1)
+        await ground.publish(topics.observation(0).value, encode(observation("agent-1", 0)))
+        await ground.publish(topics.observation(0).value, encode(observation("ground", 1)))
+        await ground.publish(topics.observation(0).value, encode(observation("ground", 0)))
+        await ground.publish(topics.command().value, encode(command("ground")), qos=1)
+        async with asyncio.timeout(WAIT_S):
+            assert (await anext(observations))[1] == observation("ground", 0)
+            assert (await anext(commands))[1] == command("ground")
+        assert commands.pending() == 0
+        assert agent0.drops["wrong_sender"] == 1
+        assert agent0.drops["wrong_vehicle"] == 1
+
+
+async def test_the_shipped_broker_takes_logins_only(team_broker: Mosquitto) -> None:
+    url = team_broker.url
+    for login in (None, Login("agent-1", team_broker.login("agent-0").password), Login("x", "y")):
+        bus = open_bus(url, login=login, connect_timeout_s=WAIT_S)
+        async with asyncio.timeout(WAIT_S / 2):
+            with pytest.raises(BusError, match="refused the connection"):
+                await bus.__aenter__()
+    async with open_bus(url, login=team_broker.login("ground"), connect_timeout_s=WAIT_S) as bus:
+        assert isinstance(bus, MqttBus)
+        assert bus.connected
+
+
+def test_write_team_keeps_secrets_private(tmp_path: Path) -> None:
+    files = write_team(tmp_path / "team", 2, passwords={"ground": "ground-secret-xyz"})
+    assert files.password("ground") == "ground-secret-xyz"
+    assert len({files.password(who) for who in ("agent-0", "agent-1", "observer")}) == 3
+    assert files.password_files["agent-1"].stat().st_mode & 0o777 == 0o600
+    assert (files.directory / "secrets").stat().st_mode & 0o777 == 0o700
+    assert files.passwd.stat().st_mode & 0o777 == 0o640
+    assert "ground-secret-xyz" not in files.passwd.read_text(encoding="utf-8")
+    assert "user agent-1\n" in files.acl.read_text(encoding="utf-8")
+    assert "user agent-2" not in files.acl.read_text(encoding="utf-8")
