@@ -1,6 +1,7 @@
 """Configuration: validated TOML files built into the values every part of the mission needs.
 
-- ``loading``: finding a file by name or path, parsing and validating it (one-line errors);
+- ``loading``: finding a file by path or by the name of a shipped one (``app.configs``),
+  parsing and validating it (one-line errors);
 - ``schema``: the pieces several files share (strict models, vehicle limits, starts, targets,
   the guidance and phase laws);
 - ``mission``: a mission file (``standoff fly``, ``ground``, ``agent``);
@@ -11,6 +12,12 @@
   (``standoff estimate --generate``).
 """
 
-from app.config.loading import CONFIG_DIR, load_config, resolve_config, validate_config
+from app.config.loading import (
+    load_config,
+    resolve_config,
+    shipped_configs,
+    shipped_text,
+    validate_config,
+)
 
-__all__ = ["CONFIG_DIR", "load_config", "resolve_config", "validate_config"]
+__all__ = ["load_config", "resolve_config", "shipped_configs", "shipped_text", "validate_config"]
