@@ -64,6 +64,9 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         action="store_true",
         help="do not read operator commands (resume N, hold N) from standard input",
     )
+    p.add_argument(
+        "--dry-run", action="store_true", help="check the file, print the plan: as standoff check"
+    )
     p.set_defaults(handler=run)
 
 
@@ -89,6 +92,13 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--simulator and --connect exclude each other")
         config = on_the_simulator(config)
     plan = build_plan(config)
+    if args.dry_run:  # standoff check's plan
+        from app.cli.check import describe_plan
+
+        print(
+            describe_plan(plan, args.connect or (), args.broker, args.base_port, str(args.config))
+        )
+        return 0
     out = args.out or default_out_dir(config.name)
     console = Console()
     console.print(
