@@ -1,12 +1,18 @@
 """Command-line options shared by ``fly``, ``ground`` and ``agent``: the mission config, the
-broker, the team's size and the built-in simulator's ports, checked like the config file."""
+broker, the team's size and the built-in simulator's ports, checked like the config file.
+
+Adding the options imports nothing heavy (``standoff --help`` builds every parser); the checks
+import what they need when they run."""
+
+from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from app.adapters.bus import BrokerUrl
-from app.config import validate_config
-from app.config.mission import MissionConfig
 from app.errors import ConfigError
+
+if TYPE_CHECKING:
+    from app.config.mission import MissionConfig
 
 DEFAULT_CONFIG = "hil"
 
@@ -17,7 +23,10 @@ def add_mission_options(p: argparse.ArgumentParser, broker_help: str) -> None:
         "config",
         nargs="?",
         default=DEFAULT_CONFIG,
-        help=f"mission config: a name in configs/ or a path (default: {DEFAULT_CONFIG})",
+        help=(
+            f"mission config: a path, or the name of a shipped one (standoff configs lists "
+            f"them; default: {DEFAULT_CONFIG})"
+        ),
     )
     p.add_argument("--broker", metavar="URL", help=broker_help)
     p.add_argument("--vehicles", type=int, help="number of vehicles (default: the config's)")
@@ -29,6 +38,9 @@ def add_mission_options(p: argparse.ArgumentParser, broker_help: str) -> None:
 def with_overrides(config: MissionConfig, args: argparse.Namespace) -> MissionConfig:
     """The config with the command line's --vehicles, --speedup, --seed and --base-port (those
     the command has), validated like the file itself (ConfigError naming the option's field)."""
+    from app.config import validate_config
+    from app.config.mission import MissionConfig
+
     sim = {
         key: value
         for key in ("speedup", "seed", "base_port")
@@ -46,6 +58,8 @@ def with_overrides(config: MissionConfig, args: argparse.Namespace) -> MissionCo
 
 def broker_url(args: argparse.Namespace, config: MissionConfig) -> str:
     """The broker to use: ``--broker``, else the config's ``bus``; checked before any I/O."""
+    from app.adapters.bus import BrokerUrl
+
     url: str | None = args.broker or config.bus
     if url is None:
         raise ConfigError(

@@ -1,16 +1,10 @@
 """``standoff agent --vehicle I [CONFIG] --broker URL``: one vehicle's agent as its own process."""
 
 import argparse
-import asyncio
 import sys
 from pathlib import Path
 
-from app.adapters.vehicle.mavsdk.urls import validate_url
-from app.cli._options import add_mission_options, broker_url, with_overrides
-from app.compose.distributed import agent_url, run_agent
-from app.config import load_config
-from app.config.mission import MissionConfig
-from app.config.plan import build_plan
+from app.cli._options import add_mission_options
 
 ORDER = 13
 
@@ -56,6 +50,15 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 
 def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from app.adapters.vehicle.mavsdk.urls import validate_url
+    from app.cli._options import broker_url, with_overrides
+    from app.compose.distributed import agent_url, run_agent
+    from app.config import load_config
+    from app.config.mission import MissionConfig
+    from app.config.plan import build_plan
+
     config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
     plan = build_plan(config)

@@ -5,30 +5,23 @@ configs, builds the core parameters, runs the estimator, writes estimates, print
 draws plots.
 """
 
+from __future__ import annotations
+
 import argparse
 import logging
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from app.adapters.estimation_csv import (
-    read_measurements,
-    read_truth,
-    write_estimates,
-    write_measurements,
-    write_truth,
-)
-from app.config.estimator import load_estimator
-from app.config.scenario import generate_scenario
-from app.core.estimation.local import StepReport
-from app.core.estimation.messages import Observation
-from app.core.estimation.pipeline import RunResult, run_centralised, run_federated
 from app.errors import InputError
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from app.core.estimation.local import StepReport
+    from app.core.estimation.messages import Observation
     from app.core.estimation.metrics import ErrorSeries
+    from app.core.estimation.pipeline import RunResult
 
 ORDER = 50
 
@@ -37,7 +30,7 @@ _log = logging.getLogger(__name__)
 _MAX_LOGGED_REJECTIONS = 20
 
 
-def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         "estimate",
         help="run the federated IMM-UKF target estimator on a measurements CSV",
@@ -73,6 +66,10 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.adapters.estimation_csv import read_measurements, read_truth, write_estimates
+    from app.config.estimator import load_estimator
+    from app.core.estimation.pipeline import run_centralised, run_federated
+
     if args.generate is not None:
         return _generate(args)
     if args.measurements is None or args.out is None:
@@ -106,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _generate(args: argparse.Namespace) -> int:
+    from app.adapters.estimation_csv import write_measurements, write_truth
+    from app.config.scenario import generate_scenario
+
     if args.out_dir is None:
         raise InputError("--generate needs --out-dir DIR")
     data = generate_scenario(args.generate, args.seed)
@@ -156,7 +156,7 @@ def _print_counts(observations: list[Observation], result: RunResult, out: Path)
 
 
 def _print_errors(
-    series: "ErrorSeries",
+    series: ErrorSeries,
     observations: list[Observation],
     truth_t: np.ndarray,
     truth: np.ndarray,
@@ -175,6 +175,8 @@ def _print_errors(
 
 
 def _raw_error(observations: list[Observation], truth_t: np.ndarray, truth: np.ndarray) -> float:
+    import numpy as np
+
     rows = [
         (o.t_s, o.east_m, o.north_m)
         for o in observations

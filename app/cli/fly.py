@@ -1,5 +1,7 @@
 """``standoff fly [CONFIG]``: a whole mission in one process (the main job)."""
 
+from __future__ import annotations
+
 import argparse
 import asyncio
 import contextlib
@@ -9,22 +11,18 @@ import sys
 import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rich.console import Console
-
-from app.adapters.live_view import LiveView
-from app.cli._options import add_mission_options, with_overrides
-from app.compose.mission import Mission
-from app.config import load_config
-from app.config.loading import validate_config
-from app.config.mission import MissionConfig
-from app.config.plan import build_plan
+from app.cli._options import add_mission_options
 from app.errors import ConfigError
+
+if TYPE_CHECKING:
+    from app.config.mission import MissionConfig
 
 ORDER = 10
 
 
-def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser(
         "fly",
         help="fly a mission: built-in simulator (default), SITL or real vehicles",
@@ -58,6 +56,17 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
     )
     p.add_argument("--speedup", type=float, help="built-in simulator speed-up factor")
     p.add_argument("--seed", type=int, help="built-in simulator's random seed")
+    gcs = p.add_mutually_exclusive_group()
+    gcs.add_argument(
+        "--gcs",
+        metavar="ENDPOINT",
+        help="where a ground station (QGroundControl, MAVProxy) sees the vehicles: HOST:PORT "
+        "or udpout:HOST:PORT (sent there), udpin:HOST:PORT (listened on, vehicle i on PORT+i) "
+        "(default: the config's [link] gcs_forward, udpout:127.0.0.1:14550 as PX4 SITL does)",
+    )
+    gcs.add_argument(
+        "--no-gcs", action="store_true", help="serve no ground station (the .tlogs are recorded)"
+    )
     p.add_argument("--quiet", action="store_true", help="no live view")
     p.add_argument(
         "--no-stdin",
@@ -73,11 +82,41 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 def on_the_simulator(config: MissionConfig) -> MissionConfig:
     """The mission flown by the built-in simulator: no vehicles to connect to, and the
     simulator's personality the one the file's autopilot adapter is written for."""
+    from app.config.loading import validate_config
+    from app.config.mission import MissionConfig
+
     personality = "arduplane" if config.link.autopilot == "arduplane" else "px4"
     raw = config.model_dump()
     raw["link"]["connect"] = []
     raw["sim"]["autopilot"] = personality
     return validate_config(raw, MissionConfig, "--simulator")
+
+
+def with_gcs(config: MissionConfig, args: argparse.Namespace) -> MissionConfig:
+    """The config with --gcs ENDPOINT or --no-gcs in ``[link] gcs_forward`` (checked)."""
+    from app.config.loading import validate_config
+    from app.config.mission import MissionConfig
+
+    spec = "off" if getattr(args, "no_gcs", False) else getattr(args, "gcs", None)
+    if spec is None:
+        return config
+    raw = config.model_dump()
+    raw["link"]["gcs_forward"] = spec
+    return validate_config(raw, MissionConfig, "--gcs" if spec != "off" else "--no-gcs")
+
+
+def gcs_line(config: MissionConfig) -> str:
+    """The line that tells the operator where a ground station sees the vehicles."""
+    spec = config.link.gcs_forward
+    if spec == "off":
+        return "ground station: none (--no-gcs); each vehicle's traffic is in its .tlog"
+    if spec.startswith("udpin:"):
+        return (
+            f"ground station: vehicle i listened for on {spec}+i-1 "
+            "(e.g. mavproxy.py --master=udpout:HOST:PORT)"
+        )
+    default = " (QGroundControl's default port)" if spec.endswith(":14550") else ""
+    return f"ground station: every vehicle sent to {spec}{default}; --gcs, --no-gcs to change"
 
 
 def default_out_dir(name: str) -> Path:
@@ -86,7 +125,16 @@ def default_out_dir(name: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    config = with_overrides(load_config(args.config, MissionConfig), args)
+    from rich.console import Console
+
+    from app.adapters.live_view import LiveView
+    from app.cli._options import with_overrides
+    from app.compose.mission import Mission
+    from app.config import load_config
+    from app.config.mission import MissionConfig
+    from app.config.plan import build_plan
+
+    config = with_gcs(with_overrides(load_config(args.config, MissionConfig), args), args)
     if args.simulator:
         if args.connect:
             raise ConfigError("--simulator and --connect exclude each other")
@@ -104,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(
         f"standoff fly: {config.name}, {plan.count} vehicles, run folder {out}", soft_wrap=True
     )
+    console.print(gcs_line(config), soft_wrap=True, highlight=False, markup=False)
     view = LiveView(console) if not args.quiet else None
     with view if view is not None else contextlib.nullcontext():
         result = asyncio.run(
@@ -115,6 +164,9 @@ def run(args: argparse.Namespace) -> int:
                 base_port=args.base_port,
                 on_snapshot=view.update if view is not None else None,
                 operator=None if args.no_stdin else stdin_lines(),
+                notify=lambda line: console.print(
+                    line, soft_wrap=True, highlight=False, markup=False
+                ),
             ).run()
         )
     console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)

@@ -1,20 +1,11 @@
 """``standoff ground [CONFIG] --broker URL``: the ground station as its own process over MQTT."""
 
 import argparse
-import asyncio
 import contextlib
 import sys
 from pathlib import Path
 
-from rich.console import Console
-
-from app.adapters.live_view import LiveView
-from app.cli._options import add_mission_options, broker_url, with_overrides
-from app.cli.fly import default_out_dir, report
-from app.compose.distributed import run_ground
-from app.config import load_config
-from app.config.mission import MissionConfig
-from app.config.plan import build_plan
+from app.cli._options import add_mission_options
 
 ORDER = 12
 
@@ -46,6 +37,18 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 
 def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from rich.console import Console
+
+    from app.adapters.live_view import LiveView
+    from app.cli._options import broker_url, with_overrides
+    from app.cli.fly import default_out_dir, report
+    from app.compose.distributed import run_ground
+    from app.config import load_config
+    from app.config.mission import MissionConfig
+    from app.config.plan import build_plan
+
     config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
     plan = build_plan(config)

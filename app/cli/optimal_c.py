@@ -4,7 +4,6 @@ import argparse
 import math
 import time
 
-from app.core.guidance.field import optimal_c, peak_curvature
 from app.errors import ConfigError
 
 ORDER = 50
@@ -34,6 +33,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.core.guidance.field import optimal_c, peak_curvature
+
     for flag, value in (
         ("--radius-m", args.radius_m),
         ("--speed-m-s", args.speed_m_s),

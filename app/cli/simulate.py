@@ -1,27 +1,25 @@
 """``standoff simulate SCENARIO``: the fast numerical simulation (paper section 5.1 and beyond)."""
 
+from __future__ import annotations
+
 import argparse
 import math
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from app.config import load_config
-from app.config.scenario import ScenarioConfig, build_setup
-from app.core.sampled_run import SimulationResult
 from app.errors import ConfigError
-from app.runtime.fastsim import (
-    SimulationSetup,
-    phase_figures,
-    phase_lower_bound_s,
-    run_simulation,
-    standoff_figures,
-)
+
+if TYPE_CHECKING:
+    from app.config.scenario import ScenarioConfig
+    from app.core.sampled_run import SimulationResult
+    from app.runtime.fastsim import SimulationSetup
 
 ORDER = 40
 
 
-def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         "simulate",
         help="fast numerical simulation of a scenario (paper section 5.1)",
@@ -77,6 +75,9 @@ def _positive(name: str, value: float | None) -> None:
 
 def scenario_with_overrides(args: argparse.Namespace) -> ScenarioConfig:
     """The scenario file with the command line's overrides applied (validated again)."""
+    from app.config import load_config
+    from app.config.scenario import ScenarioConfig
+
     for name in ("c", "dt", "k", "duration", "track_every"):
         _positive(f"--{name.replace('_', '-')}", getattr(args, name))
     if args.phase_gain is not None and not (
@@ -127,6 +128,14 @@ def _describe(scenario: ScenarioConfig) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.config.scenario import build_setup
+    from app.runtime.fastsim import (
+        phase_figures,
+        phase_lower_bound_s,
+        run_simulation,
+        standoff_figures,
+    )
+
     scenario = scenario_with_overrides(args)
     try:
         setup = build_setup(scenario)

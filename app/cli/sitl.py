@@ -1,19 +1,20 @@
 """``standoff sitl``: run the built-in MAVLink simulator alone until interrupted."""
 
-import argparse
-import asyncio
-import sys
+from __future__ import annotations
 
-from app.compose.simulator import serve
-from app.config import load_config
-from app.config.simulator import SitlScenario
+import argparse
+import sys
+from typing import TYPE_CHECKING
+
 from app.errors import ConfigError
-from sitl.config import SimConfig
+
+if TYPE_CHECKING:
+    from sitl.config import SimConfig
 
 ORDER = 20
 
 
-def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         "sitl",
         help="run the built-in MAVLink simulator (vehicles, target, camera) alone",
@@ -59,6 +60,9 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
 
 def build_sim_config(args: argparse.Namespace) -> SimConfig:
     """The simulator config from the scenario file (if any) and the command-line overrides."""
+    from app.config import load_config
+    from app.config.simulator import SitlScenario
+
     scenario = load_config(args.scenario, SitlScenario) if args.scenario else SitlScenario()
     if args.base_port is not None and not 1 <= args.base_port <= 65535:
         raise ConfigError(f"--base-port must be in 1..65535, got {args.base_port}")
@@ -85,5 +89,9 @@ def build_sim_config(args: argparse.Namespace) -> SimConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from app.compose.simulator import serve
+
     config = build_sim_config(args)
     return asyncio.run(serve(config, args.duration, sys.stdout))

@@ -1,10 +1,13 @@
 import argparse
+import subprocess
+import sys
 
 import pytest
 
 from app.cli import COMMAND_MODULES, _reasons, main
 from app.cli._options import with_overrides
 from app.config import load_config
+from app.config.loading import shipped_names
 from app.config.mission import MissionConfig
 from app.errors import ConfigError
 
@@ -118,3 +121,59 @@ def test_fly_options_override_the_config_and_keep_the_rest():
         }
     )
     assert back == config
+
+
+# the imports that made `standoff --help` take 1.1-1.6 s here: registering the subcommands
+# must not pull them in (each handler imports what it needs)
+HEAVY_MODULES = ("mavsdk", "numpy", "scipy", "matplotlib", "pydantic", "rich", "pymavlink")
+
+
+def test_building_the_parser_imports_nothing_heavy():
+    probe = (
+        "import sys; from app.cli import build_parser; build_parser();"
+        f" print(','.join(m for m in {HEAVY_MODULES!r} if m in sys.modules))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert result.stdout.strip() == ""
+
+
+def test_help_runs_in_a_fresh_interpreter_without_the_heavy_imports():
+    probe = (
+        "import sys, runpy; sys.argv = ['standoff', '--help']\n"
+        "try:\n    runpy.run_module('app', run_name='__main__')\n"
+        "except SystemExit as exit:\n"
+        f"    print('exit', exit.code, [m for m in {HEAVY_MODULES!r} if m in sys.modules])"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert "usage: standoff" in result.stdout
+    assert result.stdout.strip().endswith("exit 0 []")
+    for name in COMMAND_MODULES:
+        assert name.replace("_", "-") in result.stdout
+
+
+def test_configs_lists_every_shipped_file_with_a_description(capsys):
+    assert main(["configs"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    listed = dict(line.split(maxsplit=1) for line in lines)
+    assert set(listed) == set(shipped_names())
+    assert listed["sim-a"] == "Simulation A: start far outside the circle, flying at the target"
+    assert listed["hil"].startswith("The paper's hardware-in-the-loop mission (section 5.2")
+    assert all(len(text) <= 100 for text in listed.values())
+
+
+def test_configs_prints_a_shipped_file_that_loads_back(capsys, tmp_path):
+    assert main(["configs", "test-short"]) == 0
+    copy = tmp_path / "mine.toml"
+    copy.write_text(capsys.readouterr().out, encoding="utf-8")
+    assert load_config(copy, MissionConfig) == load_config("test-short", MissionConfig)
+
+
+def test_configs_refuses_an_unknown_name_in_one_line(capsys):
+    assert main(["configs", "no-such"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("standoff configs: error: no shipped config 'no-such' (known names:")
