@@ -521,6 +521,8 @@ class VehicleAgent:
                 await self._use_observation(observation_to_core(message, self.params.vehicle))
             case bus.GlobalEstimate():
                 heard = logic.HeardFused(global_to_core(message))
+                if self._recorder is not None:
+                    self._recorder.fused(self.params.vehicle, heard.estimate.t_s)
                 self.state, out = logic.step(self.state, heard, self.params)
             case bus.MissionState():
                 mission = logic.HeardMission(message.stage, message.active, message.t_s)
