@@ -191,6 +191,7 @@ class Mission:
             replay=self._replay,
             on_snapshot=self._on_snapshot,
             recorder=recorder,
+            clock=self._clock_now,
         )
         agents = []
         for i, link in self.links.items():
@@ -225,6 +226,10 @@ class Mission:
             self.interrupted = True
             events.emit("interrupted", ground.state.mission_t_s)
             raise
+
+    def _clock_now(self) -> float | None:
+        """The mission clock (None before it starts): the ground judges message times by it."""
+        return self.mission_clock.now_s() if self.mission_clock is not None else None
 
     def _now(self) -> float:
         return self.mission_clock.now_s() if self.mission_clock is not None else 0.0

@@ -194,6 +194,7 @@ def ground_station(
     on_snapshot: Callable[[MissionSnapshot], None] | None = None,
     name: str = "ground",
     recorder: InputRecorder | None = None,
+    clock: Callable[[], float | None] | None = None,
 ) -> GroundStation:
     """The ground station of the plan. The simulated truth (for the summary's errors) is the
     plan's target path when the vehicles are the built-in simulator or the ground simulates the
@@ -212,6 +213,7 @@ def ground_station(
         on_snapshot=on_snapshot,
         name=name,
         recorder=recorder,
+        clock=clock,
     )
 
 
@@ -312,6 +314,7 @@ def write_outputs(
             },
             "agents": {str(a.params.vehicle): dataclasses.asdict(a.counters) for a in agents},
             "fusion": _fusion_counters(ground),
+            "ground": ground.report() if ground is not None else None,
             "phase_actuators": {
                 str(a.params.vehicle): a.actuator for a in agents if a.actuator is not None
             },

@@ -483,7 +483,9 @@ class VehicleAgent:
         )
         await self._bus.publish(topics.observation(self.params.vehicle), message)
 
-    async def _use_observation(self, obs: Observation) -> None:
+    async def _use_observation(self, obs: Observation) -> bool:
+        """Feed one observation to the local filter (and its estimate out when due); whether
+        it was used."""
         if self._recorder is not None:
             self._recorder.observation(self.params.vehicle, obs)
         self.state, out = logic.step(self.state, logic.Observed(obs), self.params)
@@ -492,12 +494,12 @@ class VehicleAgent:
             self.counters.observations_dropped += 1
             self._events.emit(
                 "observation_dropped",
-                obs.t_s,
+                obs.t_s if math.isfinite(obs.t_s) else self._last_t,
                 vehicle=self.params.vehicle,
                 outcome=report.outcome,
                 reason=report.reason,
             )
-            return
+            return False
         self.counters.observations_used += 1
         if out.estimate is not None:
             await self._bus.publish(
@@ -555,7 +557,7 @@ class VehicleAgent:
             self._fault(
                 "message_refused",
                 self._last_t,
-                f"{message.kind} from {message.sender}: {out.refused}",
+                f"{type(message).__name__} from {message.sender}: {out.refused}",
             )
 
     async def _obey(self, message: bus.Command) -> None:

@@ -8,10 +8,12 @@ observation sources that are due. The loop ends once mission time reaches ``end_
 """
 
 import asyncio
+import dataclasses
 import logging
 import math
 import random
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 
 from app.core.mission import ground as logic
@@ -92,11 +94,43 @@ class ReplaySource:
 TickSource = SimulatedSensor | ReplaySource
 
 
+class MissionSilent(Exception):
+    """Raised inside the station's task group to end a mission whose vehicles all went
+    silent (``GroundRuntimeParams.silent_end_s``)."""
+
+
 @dataclass(frozen=True, slots=True)
 class GroundRuntimeParams:
+    """``silent_end_s``: once every vehicle has been silent (no status taken) for this long,
+    host seconds, the mission ends (``end_reason`` says so) and the run folder is written;
+    ``outage_after_s``: a silence this long is an outage, marked in the summary and the track
+    file (``outages``); ``watch_period_s``: how often the silence is looked at."""
+
     end_t_s: float
     tick_period_s: float = 0.1
     mission_period_s: float = 0.5
+    silent_end_s: float = 30.0
+    outage_after_s: float = 2.0
+    watch_period_s: float = 0.5
+
+
+@dataclass
+class GroundCounters:
+    """What the station refused or failed on, one message or one tick at a time."""
+
+    statuses_refused: int = 0  # stamped outside the window of its clock
+    local_estimates_refused: int = 0  # outside it, of the wrong shape, or outliers
+    message_errors: int = 0  # messages whose handling failed (logged, skipped)
+    outages: int = 0  # periods with no vehicle status for ``outage_after_s``
+
+
+@dataclass
+class Outage:
+    """A period with no vehicle status (mission time; ``end_t_s`` None while it lasts)."""
+
+    start_t_s: float
+    end_t_s: float | None
+    reason: str
 
 
 def _link_label(link_ok: bool, piloted: bool) -> str:
@@ -122,6 +156,9 @@ class GroundStation:
         on_snapshot: Callable[[MissionSnapshot], None] | None = None,
         name: str = "ground",
         recorder: InputRecorder | None = None,
+        clock: Callable[[], float | None] | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
     ) -> None:
         self.params = params
         self.runtime = runtime
@@ -136,6 +173,36 @@ class GroundStation:
         self._on_snapshot = on_snapshot
         self._piloted: set[int] = set()
         self._recorder = recorder  # what the fusion and the stages are fed (``standoff replay``)
+        self._clock = clock  # the station's own mission clock (None: none)
+        self._monotonic = monotonic
+        self._sleep = sleep
+        self._counters = GroundCounters()
+        self._faults: dict[str, int] = {}
+        self._last_heard: float | None = None  # host time of the last status taken
+        self.outages: list[Outage] = []
+        self.end_reason = ""
+
+    @property
+    def counters(self) -> GroundCounters:
+        c = self._counters
+        c.statuses_refused = self.state.statuses_refused
+        c.local_estimates_refused = self.state.locals_refused
+        c.outages = len(self.outages)
+        return c
+
+    def report(self) -> dict[str, object]:
+        """The station's counters, why the mission ended and its outages (for the summary)."""
+        return {
+            **dataclasses.asdict(self.counters),
+            "end_reason": self.end_reason,
+            "outages": [dataclasses.asdict(o) for o in self.outages],
+        }
+
+    def _now(self) -> float | None:
+        if self._clock is None:
+            return None
+        t = self._clock()
+        return t if t is not None and math.isfinite(t) else None
 
     async def run(self) -> None:
         try:
@@ -146,40 +213,107 @@ class GroundStation:
             ):
                 tg.create_task(self._hear(statuses), name="ground-statuses")
                 tg.create_task(self._hear(locals_), name="ground-local-estimates")
+                tg.create_task(self._watch_silence(), name="ground-silence")
                 if self._external is not None:
                     tg.create_task(self._relay_external(self._external), name="ground-external")
         except* MissionComplete:
+            self.end_reason = "mission complete"
             self._events.emit("mission_complete", self.state.mission_t_s)
+        except* MissionSilent:
+            self._events.emit(
+                "mission_ended", self._mission_t(), reason=self.end_reason, detail=self.end_reason
+            )
+        for outage in self.outages:
+            if outage.end_t_s is None:
+                outage.end_t_s = self._mission_t()
+
+    def _mission_t(self) -> float:
+        t = self.state.mission_t_s
+        return t if math.isfinite(t) else 0.0
+
+    async def _watch_silence(self) -> None:
+        """Outages (no vehicle status for ``outage_after_s``) and the end of a mission whose
+        vehicles all went silent (``silent_end_s``), by the host's clock: a station that hears
+        nothing has no mission time to go by."""
+        rt = self.runtime
+        while True:
+            await self._sleep(rt.watch_period_s)
+            if self._last_heard is None:
+                continue  # nothing heard yet: the vehicles are still coming
+            silent = self._monotonic() - self._last_heard
+            open_ = self.outages[-1] if self.outages and self.outages[-1].end_t_s is None else None
+            if silent > rt.outage_after_s and open_ is None:
+                connected = getattr(self._bus, "connected", True)
+                reason = "no vehicle status" + ("" if connected else " (bus down)")
+                self.outages.append(Outage(self._mission_t(), None, reason))
+                self._events.emit("outage", self._mission_t(), reason=reason)
+            if silent > rt.silent_end_s:
+                self.end_reason = (
+                    f"every vehicle silent for {silent:.0f} s (limit {rt.silent_end_s:g} s)"
+                )
+                log.error("ground: %s: the mission ends", self.end_reason)
+                raise MissionSilent
 
     async def _hear(self, subscription: Subscription) -> None:
         async for _topic, message in subscription:
-            match message:
-                case bus.VehicleStatus():
-                    self._note_control(message)
-                    report = logic.VehicleReport(
-                        message.t_s,
-                        message.east_m,
-                        message.north_m,
-                        message.course_rad,
-                        message.speed_m_s,
-                        link_ok=message.link == "ok",
-                        # flown by its pilot: heard (not lost), but out of the formation until
-                        # its agent is told to resume
-                        healthy=message.healthy and message.control != "pilot",
-                    )
-                    if self._recorder is not None:
-                        self._recorder.status(message.vehicle, report)
-                    heard = logic.HeardStatuses(((message.vehicle, report),))
-                    self.state, out = logic.step(self.state, heard, self.params, self._truth)
-                    if out.tick_t_s is not None:
-                        await self._carry(out.tick_t_s, out)
-                case bus.LocalEstimate():
-                    local = logic.HeardLocal(local_to_core(message))
-                    if self._recorder is not None:
-                        self._recorder.local(message.vehicle, message.t_s)
-                    self.state, _ = logic.step(self.state, local, self.params)
-                case _:
-                    pass
+            try:
+                await self._heard(message)
+            except MissionComplete:
+                raise
+            except Exception as exc:  # one bad message never ends the station: counted
+                self._counters.message_errors += 1
+                self._fault("message_failed", exc)
+
+    def _fault(self, kind: str, error: object) -> None:
+        """An error or a refusal: a log line and an event at its 1st, 2nd, 5th, 10th, ...
+        occurrence (a flood must not flood the log)."""
+        n = self._faults[kind] = self._faults.get(kind, 0) + 1
+        if not _log_spaced(n):
+            return
+        detail = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else error
+        log.warning("ground: %s (%d so far): %s", kind, n, detail)
+        self._events.emit(kind, self._mission_t(), count=n, repeat=n > 1, detail=str(detail)[:300])
+
+    def _heard_status(self, vehicle: int, t_s: float) -> None:
+        self._last_heard = self._monotonic()
+        if self.outages and self.outages[-1].end_t_s is None:
+            self.outages[-1].end_t_s = t_s
+            self._events.emit("outage_over", t_s, vehicle=vehicle)
+
+    async def _heard(self, message: bus.Message) -> None:
+        match message:
+            case bus.VehicleStatus():
+                report = logic.VehicleReport(
+                    message.t_s,
+                    message.east_m,
+                    message.north_m,
+                    message.course_rad,
+                    message.speed_m_s,
+                    link_ok=message.link == "ok",
+                    # flown by its pilot: heard (not lost), but out of the formation until
+                    # its agent is told to resume
+                    healthy=message.healthy and message.control != "pilot",
+                )
+                if self._recorder is not None:
+                    self._recorder.status(message.vehicle, report)
+                heard = logic.HeardStatuses(((message.vehicle, report),), self._now())
+                self.state, out = logic.step(self.state, heard, self.params, self._truth)
+                if out.refused:
+                    self._fault("status_refused", f"{message.sender}: t_s {message.t_s!r}")
+                    return
+                self._heard_status(message.vehicle, message.t_s)
+                self._note_control(message)
+                if out.tick_t_s is not None:
+                    await self._carry(out.tick_t_s, out)
+            case bus.LocalEstimate():
+                local = logic.HeardLocal(local_to_core(message), self._now())
+                if self._recorder is not None:
+                    self._recorder.local(message.vehicle, message.t_s)
+                self.state, out = logic.step(self.state, local, self.params)
+                if out.refused:
+                    self._fault("local_estimate_refused", f"{message.sender} at {message.t_s!r}")
+            case _:
+                pass
 
     def _note_control(self, message: bus.VehicleStatus) -> None:
         """An event when a vehicle's pilot takes it (or the mission takes it back)."""
@@ -206,7 +340,10 @@ class GroundStation:
             async for _topic, message in external:
                 if isinstance(message, bus.TargetObservation) and message.vehicle is not None:
                     if message.vehicle in self.params.vehicles:
-                        await self._bus.publish(topics.observation(message.vehicle), message)
+                        # relayed under the ground's name: only the ground and the vehicle's
+                        # own agent may speak on its observation topic (topics.refusal)
+                        relayed = message.model_copy(update={"sender": self.name})
+                        await self._bus.publish(topics.observation(message.vehicle), relayed)
                     else:
                         self._events.emit(
                             "observation_dropped",
@@ -269,3 +406,12 @@ class GroundStation:
         return MissionSnapshot(
             sample.t_s, self.runtime.end_t_s, sample.stage, sample.target_segment, rows
         )
+
+
+def _log_spaced(count: int) -> bool:
+    """1, 2, 5, 10, 20, 50, ...: which occurrences of a repeating fault are logged."""
+    if count < 1:
+        return False
+    while count % 10 == 0:
+        count //= 10
+    return count in (1, 2, 5)

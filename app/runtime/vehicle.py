@@ -145,10 +145,29 @@ async def prepare_vehicle(link: VehicleLink, bring_up: BringUp, events: EventSin
     events.emit("offboard", latest.t_s, vehicle=link.vehicle_id - 1, autopilot=link.autopilot_name)
 
 
-async def hold_all(links: Mapping[int, VehicleLink], events: EventSink, t_s: float) -> None:
-    """Put every vehicle in hold (a refusal is logged, not raised: the others still hold)."""
-    for i, link in links.items():
+HOLD_TIMEOUT_S = 10.0
+"""Host seconds a vehicle is given to accept the hold at the end of a mission (one real run
+waited 2.5 minutes in a MAVSDK offboard stop)."""
+
+
+async def hold_all(
+    links: Mapping[int, VehicleLink],
+    events: EventSink,
+    t_s: float,
+    timeout_s: float = HOLD_TIMEOUT_S,
+) -> None:
+    """Put every vehicle in hold, all at once, each given ``timeout_s`` (a refusal or a
+    timeout is logged as ``hold_refused``, not raised: the others still hold)."""
+
+    async def hold(i: int, link: VehicleLink) -> None:
         try:
-            await link.hold()
+            async with asyncio.timeout(timeout_s):
+                await link.hold()
         except LinkError as exc:
             events.emit("hold_refused", t_s, vehicle=i, reason=str(exc))
+        except TimeoutError:
+            events.emit("hold_refused", t_s, vehicle=i, reason=f"no answer within {timeout_s:g} s")
+
+    async with asyncio.TaskGroup() as tg:
+        for i, link in links.items():
+            tg.create_task(hold(i, link), name=f"hold-{i}")

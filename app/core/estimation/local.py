@@ -11,13 +11,15 @@ the observation. Observations are asynchronous: the filter predicts to each one'
 - stale (older than that): dropped, counted.
 - outlier (every model's normalised innovation above the chi-square gate): dropped, counted; the
   filter keeps the prediction to the observation's time. After ``max_consecutive_gated`` gated
-  observations in a row the filter restarts from the next one (a lost track), counted.
+  observations in a row the filter restarts from the next one (a lost track), counted; the
+  caller may refuse that restart on an observation it finds inconsistent (``may_restart``).
 
 A filter that hears nothing can be moved to any later time with ``local_predict``; its
 covariance grows with the process noise.
 """
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -215,12 +217,18 @@ def local_predict(state: LocalState, t_s: float, params: LocalParams) -> LocalSt
 
 
 def local_step(
-    state: LocalState, obs: Observation, params: LocalParams
+    state: LocalState,
+    obs: Observation,
+    params: LocalParams,
+    *,
+    may_restart: Callable[[Observation], bool] | None = None,
 ) -> tuple[LocalState, StepReport]:
     """Take one observation: validate, predict to its time, gate, update (Appendix B).
 
     Returns the new state and a report; the input state is never modified, and a rejected
     observation leaves the returned state equal to the input apart from the counters.
+    ``may_restart``: whether a lost track may restart on this observation (the agent asks the
+    team's fused estimate; a burst of forged fixes must not become the track); None: always.
     """
     counters = state.counters
     problem = check_observation(obs, params)
@@ -247,7 +255,11 @@ def local_step(
     result = imm_update(predicted, z, r)
     nis = float(np.min(result.nis))
     if not (nis <= params.gate_nis):
-        if lag <= 0.0 and state.consecutive_gated + 1 >= params.max_consecutive_gated:
+        if (
+            lag <= 0.0
+            and state.consecutive_gated + 1 >= params.max_consecutive_gated
+            and (may_restart is None or may_restart(obs))
+        ):
             counters = replace(counters, restarts=counters.restarts + 1)
             fresh = _start(obs, _noise(obs, params), params)
             new = replace(state, imm=fresh, counters=counters, consecutive_gated=0, recent=(obs,))

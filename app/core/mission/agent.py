@@ -33,6 +33,9 @@ state (``MissionAgentState.estimates``, ``.statuses``).
 import math
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+from numpy.typing import NDArray
+
 from app.core.agent import (
     AgentEvent,
     AgentInputs,
@@ -52,6 +55,8 @@ from app.core.guidance import course_id as cid
 from app.core.mission.schedule import Every
 from app.core.mission.stage import Stage
 from app.core.mission.team import dead_reckon
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,6 +93,17 @@ class MissionAgentParams:
     predicted forward with ``prediction_model``; ``use_target_accel`` passes the estimated
     acceleration to the moving-target correction.
 
+    What it hears cannot push it (issue #14): a message stamped more than ``max_ahead_s`` ahead
+    of the agent's own clock (its newest control tick, its vehicle's time) is refused, never
+    used to move that clock; a fused estimate is checked against the agent's own local one
+    (position NIS over the sum of both covariances above ``fused_gate_nis``, or a position
+    covariance over 100 times the local one's: refused, the local estimate flown instead); the
+    local filter restarts a lost track only on a fix consistent with the fused estimate. With
+    the ground silent (no fused estimate or mission state taken) the agent keeps orbiting the
+    last good estimate, held still once it is older than ``max_age_s``; after
+    ``ground_silent_hold_s`` of silence it holds (``Hold``; an event ``ground_silent``) until
+    a ``resume``.
+
     Latency compensation (improvement): ``latency_s`` is the time from a telemetry frame until
     its command starts to act on the vehicle, ``hold_s`` how long a command then acts (the
     control period). The agent steers on where the vehicle and the target will be in the middle
@@ -122,8 +138,15 @@ class MissionAgentParams:
     course_id: cid.CourseIdParams | None = None
     fly_identified: bool = True
     course_id_change: float = 0.05
+    max_ahead_s: float = 1.0
+    fused_gate_nis: float = 50.0
+    ground_silent_hold_s: float = 60.0
 
     def __post_init__(self) -> None:
+        for name in ("max_ahead_s", "fused_gate_nis", "ground_silent_hold_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
         if not (math.isfinite(self.course_id_change) and 0.0 < self.course_id_change < 1.0):
             raise ValueError(f"course_id_change must be in (0, 1), got {self.course_id_change!r}")
         if not self.moving_speed_m_s >= 0.0:  # inf: only the track stage flies ``track``
@@ -177,6 +200,10 @@ class MissionAgentState:
     #: the course-loop identifier (``MissionAgentParams.course_id``) and what it has tuned
     course_id: cid.CourseIdState = field(default_factory=cid.initial_state)
     tuned: TunedLoop | None = None
+    #: the agent's own clock: its newest control tick (vehicle time)
+    now_t_s: float = -math.inf
+    #: own-clock time of the last fused estimate or mission state taken (None: never)
+    ground_heard_t_s: float | None = None
 
 
 def initial_agent_state(
@@ -191,24 +218,130 @@ def initial_agent_state(
     )
 
 
+def ahead_of_clock(state: MissionAgentState, t_s: float, params: MissionAgentParams) -> str:
+    """Why a message stamped ``t_s`` is refused as not of now (empty string: it is not): a
+    non-finite time, or more than ``max_ahead_s`` ahead of the agent's own clock (before its
+    first control tick the agent has no clock and judges nothing by it)."""
+    if not math.isfinite(t_s):
+        return f"non-finite time {t_s!r}"
+    now = state.now_t_s
+    if math.isfinite(now) and t_s > now + params.max_ahead_s:
+        return (
+            f"stamped {t_s - now:.3g} s ahead of the agent's clock (limit {params.max_ahead_s:g} s)"
+        )
+    return ""
+
+
+_POS = np.ix_((0, 2), (0, 2))
+
+
+def _position_nis(x: FloatArray, p: FloatArray, z: FloatArray, r: FloatArray) -> float:
+    """The normalised distance between the position of state (x, p) and position z of
+    covariance r: d^T (P_pos + r)^-1 d; inf when that covariance is not positive definite."""
+    d = np.array([z[0] - x[0], z[1] - x[2]])
+    s = p[_POS] + r
+    try:
+        c = np.linalg.cholesky(0.5 * (s + s.T))
+    except np.linalg.LinAlgError:
+        return math.inf
+    w = np.linalg.solve(c, d)
+    return float(w @ w)
+
+
+def _predicted(
+    x: FloatArray, p: FloatArray, dt_s: float, params: MissionAgentParams
+) -> tuple[FloatArray, FloatArray]:
+    model = params.prediction_model
+    f = model.transition(dt_s)
+    return f @ x, f @ p @ f.T + model.process_noise(abs(dt_s))
+
+
+def check_fused(state: MissionAgentState, fused: GlobalEstimate, params: MissionAgentParams) -> str:
+    """Why the fused estimate ``fused`` is not believed (empty string: it is): non-finite or
+    absurd values, per-model moments that are not this agent's models, or a position the
+    agent's own local estimate (predicted to its time) says it cannot be at."""
+    x, p = np.asarray(fused.x), np.asarray(fused.p)
+    if x.shape != (6,) or p.shape != (6, 6):
+        return f"state of shape {x.shape}, covariance {p.shape}"
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(p))):
+        return "non-finite state or covariance"
+    if not np.all(np.abs(x) <= params.local.max_abs_position_m):
+        return f"state beyond {params.local.max_abs_position_m:g}"
+    moments = (fused.mu, fused.model_x, fused.model_p)
+    if any(m is not None for m in moments):
+        r = len(params.local.imm.models)
+        shapes = [np.shape(m) if m is not None else None for m in moments]
+        if shapes != [(r,), (r, 6), (r, 6, 6)] or not all(
+            np.all(np.isfinite(m)) for m in moments if m is not None
+        ):
+            return f"per-model moments that are not of this agent's {r} models"
+    local = state.local.estimate()
+    if local is None or abs(fused.t_s - local.t_s) > params.max_age_s:
+        return ""  # nothing recent of its own to judge by
+    xl, pl = _predicted(local.x, local.p, fused.t_s - local.t_s, params)
+    nis = _position_nis(xl, pl, x[[0, 2]], p[_POS])
+    if not nis <= params.fused_gate_nis:
+        return (
+            f"{math.hypot(x[0] - xl[0], x[2] - xl[2]):.3g} m from the agent's own estimate "
+            f"(NIS {nis:.3g} above {params.fused_gate_nis:g})"
+        )
+    if np.trace(p[_POS]) > 100.0 * np.trace(pl[_POS]):
+        return "far less certain than the agent's own estimate"
+    return ""
+
+
 def observe(
     state: MissionAgentState, obs: Observation, params: MissionAgentParams
 ) -> tuple[MissionAgentState, StepReport]:
-    """Feed one observation to the local filter; the report says whether it was used and why not."""
-    local, report = local_step(state.local, obs, params.local)
+    """Feed one observation to the local filter; the report says whether it was used and why
+    not. One stamped ahead of the agent's clock is refused (``invalid``); the filter restarts
+    a lost track only on a fix the fused estimate, when fresh, finds consistent."""
+    ahead = ahead_of_clock(state, obs.t_s, params)
+    if ahead:
+        counters = state.local.counters
+        counters = replace(counters, invalid=counters.invalid + 1)
+        local = replace(state.local, counters=counters)
+        return replace(state, local=local), StepReport("invalid", ahead)
+    fused = state.fused
+
+    def consistent(fix: Observation) -> bool:
+        if fused is None or abs(fix.t_s - fused.t_s) > params.max_age_s:
+            return True
+        x, p = _predicted(fused.x, fused.p, fix.t_s - fused.t_s, params)
+        sigma = params.local.default_sigma_m if fix.sigma_m is None else fix.sigma_m
+        z = np.array([fix.east_m, fix.north_m])
+        return _position_nis(x, p, z, np.eye(2) * sigma * sigma) <= params.fused_gate_nis
+
+    local, report = local_step(state.local, obs, params.local, may_restart=consistent)
     return replace(state, local=local), report
+
+
+def _heard_ground(state: MissionAgentState) -> MissionAgentState:
+    now = state.now_t_s
+    return replace(state, ground_heard_t_s=now) if math.isfinite(now) else state
 
 
 def hear_fused(
     state: MissionAgentState, fused: GlobalEstimate, params: MissionAgentParams
 ) -> MissionAgentState:
-    """Keep the newest fused estimate and apply the main filter's information allocation."""
+    """Keep the newest fused estimate and apply the main filter's information allocation
+    (one the agent does not believe, ``ahead_of_clock`` or ``check_fused``, is ignored:
+    ``step`` says why)."""
+    return _hear_fused(state, fused, params)[0]
+
+
+def _hear_fused(
+    state: MissionAgentState, fused: GlobalEstimate, params: MissionAgentParams
+) -> tuple[MissionAgentState, str]:
+    refused = ahead_of_clock(state, fused.t_s, params) or check_fused(state, fused, params)
+    if refused:
+        return state, refused
     if state.fused is not None and fused.t_s < state.fused.t_s:
-        return state
+        return state, ""
     local = state.local
     if params.main is not None:
         local = apply_feedback(local, fused, params.local, params.main)
-    return replace(state, fused=fused, local=local)
+    return _heard_ground(replace(state, fused=fused, local=local)), ""
 
 
 def hear_mission(
@@ -219,7 +352,7 @@ def hear_mission(
         known = Stage(stage)
     except ValueError:
         raise ValueError(f"unknown stage {stage!r}") from None
-    return replace(state, stage=known, active=tuple(sorted(set(active))))
+    return _heard_ground(replace(state, stage=known, active=tuple(sorted(set(active)))))
 
 
 def hear_teammate(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
@@ -255,6 +388,11 @@ def target_at(
             if not params.use_target_accel:
                 ae = an = 0.0
             return TargetInfo(e, n, ve, vn, ae, an)
+    if candidates and state.ground_heard_t_s is not None:
+        # the ground went silent and nothing fresh is known: orbit the last good estimate
+        # where it was last known (its velocity is not flown on for ever), until the hold
+        t0, x = max(candidates, key=lambda c: c[0])
+        return TargetInfo(float(x[0]), float(x[2]))
     return None
 
 
@@ -449,8 +587,11 @@ class HeardFused:
 
 @dataclass(frozen=True, slots=True)
 class HeardMission:
+    """The ground's stage and team; ``t_s`` its time (None: not judged by the agent's clock)."""
+
     stage: str
     active: tuple[int, ...]
+    t_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -473,7 +614,8 @@ AgentInput = Observed | Telemetry | Control | HeardFused | HeardMission | HeardT
 class AgentOutbox:
     """What one step wants sent or recorded: the vehicle ``command`` (None while holding), the
     local ``estimate`` to publish, the vehicle's ``status``, the observation's ``report``
-    (used, or why not), the ``stage`` when the step changed it, and events."""
+    (used, or why not), the ``stage`` when the step changed it, events, and ``refused``: why
+    a message heard was not believed (empty: it was, or there was none)."""
 
     command: Command | None = None
     estimate: LocalEstimate | None = None
@@ -481,6 +623,7 @@ class AgentOutbox:
     report: StepReport | None = None
     stage: Stage | None = None
     events: tuple[AgentEvent, ...] = ()
+    refused: str = ""
 
 
 _EMPTY = AgentOutbox()
@@ -509,18 +652,45 @@ def step(
                 status=_status(state, t, own, params)
             )
         case Control(t, own):
+            if t > state.now_t_s:
+                state = replace(state, now_t_s=t)
+            state, silent = _ground_silence(state, t, params)
             state, command, events = control(state, t, own, params)
-            return state, AgentOutbox(command=None if state.holding else command, events=events)
+            return state, AgentOutbox(
+                command=None if state.holding else command, events=(*silent, *events)
+            )
         case HeardFused(estimate):
-            return hear_fused(state, estimate, params), _EMPTY
-        case HeardMission(stage, active):
+            state, refused = _hear_fused(state, estimate, params)
+            return state, AgentOutbox(refused=refused) if refused else _EMPTY
+        case HeardMission(stage, active, t):
+            refused = ahead_of_clock(state, t, params) if t is not None else ""
+            if refused:
+                return state, AgentOutbox(refused=refused)
             before = state.stage
             state = hear_mission(state, stage, active)
             return state, AgentOutbox(stage=state.stage) if state.stage != before else _EMPTY
         case HeardTeammate(vehicle, fix):
+            refused = ahead_of_clock(state, fix.t_s, params)
+            if refused:
+                return state, AgentOutbox(refused=refused)
             return hear_teammate(state, vehicle, fix), _EMPTY
         case Hold(holding):
             return set_holding(state, holding), _EMPTY
+
+
+def _ground_silence(
+    state: MissionAgentState, t_s: float, params: MissionAgentParams
+) -> tuple[MissionAgentState, tuple[AgentEvent, ...]]:
+    """Hold once the ground station, heard before, has been silent (no fused estimate or
+    mission state taken) for ``ground_silent_hold_s`` of the agent's clock."""
+    heard = state.ground_heard_t_s
+    if heard is None or state.holding or t_s - heard <= params.ground_silent_hold_s:
+        return state, ()
+    detail = (
+        f"nothing believable from the ground station for {t_s - heard:.1f} s "
+        f"(limit {params.ground_silent_hold_s:g} s): holding until 'resume'"
+    )
+    return replace(state, holding=True), (AgentEvent(t_s, "ground_silent", detail),)
 
 
 def _status(

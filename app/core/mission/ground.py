@@ -18,6 +18,8 @@ is part of the state (``GroundState.ticks``, ``.announcements``).
 import math
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from app.core.estimation.federated import (
     MainParams,
     MainState,
@@ -61,7 +63,16 @@ class GroundParams:
     predicted with ``coast_model`` instead of fused (constant velocity: the acceleration last
     estimated is not extrapolated, which would take the predicted target off at ever higher
     speed; the acceleration states are held). ``prediction_model``: how the fused estimate is
-    predicted to a sample's time (the agents' own ``MissionAgentParams.prediction_model``)."""
+    predicted to a sample's time (the agents' own ``MissionAgentParams.prediction_model``).
+
+    What the station hears cannot push it (issue #14): a status or local estimate stamped more
+    than ``max_ahead_s`` ahead of the station's own mission clock (``clock_t_s`` of the input;
+    without one, of the mission time so far), or more than ``max_behind_s`` behind it, is
+    refused and counted, and mission time never passes that clock. A local estimate whose
+    position the fused estimate (predicted to its time) finds further off than
+    ``local_gate_nis`` (position NIS over the sum of both covariances) is refused as an
+    outlier while the fusion is live (some estimate taken within ``coast_after_s``), as is one
+    of the wrong shape (per-model moments that are not the main filter's models)."""
 
     vehicles: tuple[int, ...]
     radius_m: float
@@ -74,8 +85,15 @@ class GroundParams:
     coast_after_s: float = 1.0
     coast_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
     prediction_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
+    max_ahead_s: float = 1.0
+    max_behind_s: float = 30.0
+    local_gate_nis: float = 50.0
 
     def __post_init__(self) -> None:
+        for name in ("max_ahead_s", "max_behind_s", "local_gate_nis"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
         if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
             raise ValueError(f"vehicles must be unique and non-empty, got {self.vehicles}")
         for name in (
@@ -106,6 +124,9 @@ class GroundState:
     ticks: Every = field(default_factory=lambda: Every(0.1))
     announcements: Every = field(default_factory=lambda: Every(0.5))
     announced: Stage | None = None  # the stage last announced
+    statuses_refused: int = 0  # stamped outside the window of the station's clock
+    locals_refused: int = 0  # stamped outside it, of the wrong shape, or outliers
+    last_taken_t_s: float = -math.inf  # time of the newest local estimate taken into the fusion
 
     def report(self, vehicle: int) -> VehicleReport | None:
         return dict(self.reports).get(vehicle)
@@ -118,23 +139,112 @@ class GroundEvent:
     detail: str = ""
 
 
-def hear_status(state: GroundState, vehicle: int, report: VehicleReport) -> GroundState:
-    """Keep a vehicle's newest report and advance mission time (older reports are ignored)."""
+def out_of_window(
+    state: GroundState, t_s: float, params: GroundParams, clock_t_s: float | None
+) -> str:
+    """Why a message stamped ``t_s`` is refused as not of now (empty string: it is not):
+    non-finite, or outside [clock - ``max_behind_s``, clock + ``max_ahead_s``] of the
+    station's own clock (``clock_t_s``; None: the mission time so far, when there is one)."""
+    if not math.isfinite(t_s):
+        return f"non-finite time {t_s!r}"
+    now = clock_t_s if clock_t_s is not None else state.mission_t_s
+    if not math.isfinite(now):
+        return ""
+    if t_s > now + params.max_ahead_s:
+        limit = params.max_ahead_s
+        return f"stamped {t_s - now:.3g} s ahead of the station's clock (limit {limit:g} s)"
+    if t_s < now - params.max_behind_s:
+        limit = params.max_behind_s
+        return f"stamped {now - t_s:.3g} s behind the station's clock (limit {limit:g} s)"
+    return ""
+
+
+def hear_status(
+    state: GroundState,
+    vehicle: int,
+    report: VehicleReport,
+    params: GroundParams | None = None,
+    clock_t_s: float | None = None,
+) -> GroundState:
+    """Keep a vehicle's newest report and advance mission time (older reports are ignored);
+    with ``params``, one outside the window of the station's clock is refused and counted, and
+    mission time goes no further than ``clock_t_s``."""
+    if params is not None and out_of_window(state, report.t_s, params, clock_t_s):
+        return replace(state, statuses_refused=state.statuses_refused + 1)
     held = dict(state.reports)
     old = held.get(vehicle)
     if old is not None and report.t_s < old.t_s:
         return state
     held[vehicle] = report
+    t = report.t_s if clock_t_s is None else min(report.t_s, clock_t_s)
     return replace(
-        state, reports=tuple(sorted(held.items())), mission_t_s=max(state.mission_t_s, report.t_s)
+        state, reports=tuple(sorted(held.items())), mission_t_s=max(state.mission_t_s, t)
     )
 
 
-def hear_local(state: GroundState, estimate: LocalEstimate) -> GroundState:
+def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParams) -> str:
+    """Why the station does not take local estimate ``estimate`` into the fusion (empty
+    string: it does): the wrong shape, non-finite, or an outlier against the live fusion."""
+    x, p = np.asarray(estimate.x), np.asarray(estimate.p)
+    if (
+        x.shape != (6,)
+        or p.shape != (6, 6)
+        or not (np.all(np.isfinite(x)) and np.all(np.isfinite(p)))
+    ):
+        return "state or covariance of the wrong shape or non-finite"
+    moments = (estimate.mu, estimate.model_x, estimate.model_p)
+    models = params.main.imm.models if params.main.imm is not None else None
+    if any(m is not None and np.size(m) > 0 for m in moments):
+        r = len(models) if models is not None else np.shape(estimate.mu)[0]
+        shapes = [np.shape(m) if m is not None else None for m in moments]
+        if shapes != [(r,), (r, 6), (r, 6, 6)]:
+            return f"per-model moments {shapes} that are not the main filter's {r} models"
+        if not all(np.all(np.isfinite(m)) for m in moments if m is not None):
+            return "non-finite per-model moments"
+    fused = state.fused
+    live = estimate.t_s - state.last_taken_t_s <= params.coast_after_s
+    if fused is None or not live or abs(estimate.t_s - fused.t_s) > params.main.max_age_s:
+        return ""
+    model = params.prediction_model
+    dt = estimate.t_s - fused.t_s
+    f = model.transition(dt)
+    xf, pf = f @ fused.x, f @ fused.p @ f.T + model.process_noise(abs(dt))
+    pos = np.ix_((0, 2), (0, 2))
+    d = np.array([x[0] - xf[0], x[2] - xf[2]])
+    s = pf[pos] + p[pos]
+    try:
+        c = np.linalg.cholesky(0.5 * (s + s.T))
+    except np.linalg.LinAlgError:
+        return "covariance not positive definite"
+    w = np.linalg.solve(c, d)
+    nis = float(w @ w)
+    if not nis <= params.local_gate_nis:
+        return (
+            f"{math.hypot(d[0], d[1]):.3g} m from the fused estimate "
+            f"(NIS {nis:.3g} above {params.local_gate_nis:g})"
+        )
+    return ""
+
+
+def hear_local(
+    state: GroundState,
+    estimate: LocalEstimate,
+    params: GroundParams | None = None,
+    clock_t_s: float | None = None,
+) -> GroundState:
+    """Take a local estimate into the main filter; with ``params``, one outside the window of
+    the station's clock, of the wrong shape or an outlier (``check_local``) is refused."""
+    if params is not None:
+        refused = out_of_window(state, estimate.t_s, params, clock_t_s) or check_local(
+            state, estimate, params
+        )
+        if refused:
+            return replace(state, locals_refused=state.locals_refused + 1)
     return replace(
         state,
         main=main_receive(state.main, estimate),
         last_local_t_s=max(state.last_local_t_s, estimate.t_s),
+        last_taken_t_s=max(state.last_taken_t_s, estimate.t_s),
     )
 
 
@@ -243,14 +353,18 @@ def initial_ground_state(tick_period_s: float = 0.1, mission_period_s: float = 0
 
 @dataclass(frozen=True, slots=True)
 class HeardStatuses:
-    """The newest statuses of one or more vehicles, heard at once."""
+    """The newest statuses of one or more vehicles, heard at once; ``clock_t_s``: the
+    station's own mission clock when they were heard (None: it has none, and judges them by
+    the mission time so far)."""
 
     reports: tuple[tuple[int, VehicleReport], ...]
+    clock_t_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class HeardLocal:
     estimate: LocalEstimate
+    clock_t_s: float | None = None
 
 
 GroundInput = HeardStatuses | HeardLocal
@@ -277,9 +391,11 @@ class GroundOutbox:
     mission: MissionUpdate | None = None
     sample: TeamSample | None = None
     events: tuple[GroundEvent, ...] = ()
+    refused: bool = False  # the input was refused (``GroundState.*_refused`` count it)
 
 
 _EMPTY = GroundOutbox()
+_REFUSED = GroundOutbox(refused=True)
 
 
 def step(
@@ -289,11 +405,16 @@ def step(
     run it (``tick``). Samples are scored against ``truth`` when given, else the orbit is
     scored about the estimate."""
     match event:
-        case HeardLocal(estimate):
-            return hear_local(state, estimate), _EMPTY
-        case HeardStatuses(reports):
+        case HeardLocal(estimate, clock):
+            refused = state.locals_refused
+            state = hear_local(state, estimate, params, clock)
+            return state, _REFUSED if state.locals_refused > refused else _EMPTY
+        case HeardStatuses(reports, clock):
+            refused = state.statuses_refused
             for vehicle, report in reports:
-                state = hear_status(state, vehicle, report)
+                state = hear_status(state, vehicle, report, params, clock)
+            if state.statuses_refused > refused:
+                return state, _REFUSED
     t = state.mission_t_s
     if not state.ticks.due(t):
         return state, _EMPTY
