@@ -25,3 +25,27 @@ def mosquitto_fixture(tmp_path: Path) -> Iterator[Mosquitto]:
         yield broker
     finally:
         broker.stop()
+
+
+# The test command (scripts/test) runs two lanes at once on a multi-core machine: the tests that
+# fly in wall-clock time (simulator over UDP, brokers, processes) at normal priority, and the pure
+# computations (these paths) beside them at a lower priority, so they use only the idle cores.
+_COMPUTE_LANE = (
+    "tests/core/",
+    "tests/config/",
+    "tests/report/",
+    "tests/runtime/test_fastsim.py",
+    "tests/runtime/test_mission_fastsim.py",
+    "tests/runtime/test_wire.py",
+    "tests/adapters/test_bus_codec.py",
+    "tests/sitl/test_sitl_geodesy.py",
+    "tests/sitl/test_target.py",
+)
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        where = item.path.resolve().relative_to(_ROOT).as_posix()
+        if where.startswith(_COMPUTE_LANE):
+            item.add_marker(pytest.mark.compute)

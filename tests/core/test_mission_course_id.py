@@ -180,7 +180,7 @@ def test_the_hil_mission_on_a_weak_autopilot_flies_the_circle_once_identified() 
             replace(a, course_id=cid.params_for(a.agent.envelope) if identify else None)
             for a in plan.agents
         )
-        setup = MissionSimSetup(replace(plan, agents=agents), end_t_s=300.0, vehicle_limits=weak)
+        setup = MissionSimSetup(replace(plan, agents=agents), end_t_s=200.0, vehicle_limits=weak)
         result = run_mission_sim(setup)
         errors = [
             e for s in result.samples if s.t_s >= 150.0 for e in s.distance_errors(90.0).values()
