@@ -50,6 +50,12 @@ from app.config.plan import MissionPlan, build_plan
 
 HOLD_S = 0.1  # the control period: each command acts for one
 
+
+def _seconds(value: float | None) -> float | str:
+    """A time for the table, or "never" for a team that never formed."""
+    return "never" if value is None else round(value, 1)
+
+
 KEYS = (
     "dist_rms_m",
     "dist_max_m",
@@ -175,7 +181,7 @@ def main() -> None:
     for name in names:
         rs = runs[name]
         print(
-            f"{name:12s}: gather + adjust {[round(r['formation_s'], 1) for r in rs]} s; commands "
+            f"{name:12s}: gather + adjust {[_seconds(r['formation_s']) for r in rs]} s; commands "
             f"finite, speeds within limits: {all(r['commands_ok'] for r in rs)}; largest "
             f"course rate asked / limit {max(r['rate_ratio'] for r in rs):.4f}; "
             f"cpu {np.mean([r['cpu_s'] for r in rs]):.1f} s/run"
