@@ -367,6 +367,11 @@ class ArduPlaneAutopilot:
         return MANUAL
 
     @property
+    def trim_throttle(self) -> float:
+        """TRIM_THROTTLE: the cruise throttle (ArduPlane default 45 %)."""
+        return 0.45
+
+    @property
     def stream_defaults(self) -> StreamTable:
         return self._streams
 
@@ -573,15 +578,20 @@ class ArduPlaneAutopilot:
                 return mavlink.MAV_RESULT_DENIED, []
             return self._change_mode(v, as_int(p[1], -1), t_s)
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            # AP_Arming_Plane::arm / disarm: "Throttle armed" / "Throttle disarmed"
+            info = mavlink.MAV_SEVERITY_INFO
             if p[0] >= 0.5:
                 was = v.armed
                 self.arm(v, t_s)
-                return accepted, [v.heartbeat()] if not was else []
+                return accepted, [] if was else [
+                    v.statustext(info, "Throttle armed"),
+                    v.heartbeat(),
+                ]
             if v.in_air and as_int(p[1]) != ARM_DISARM_FORCE:
                 return failed, []  # disarming in flight needs the force value
             was = v.armed
             v.disarm()
-            return accepted, [v.heartbeat()] if was else []
+            return accepted, [v.statustext(info, "Throttle disarmed"), v.heartbeat()] if was else []
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             return failed, []  # handle_command_MAV_CMD_NAV_TAKEOFF: only a QuadPlane takes off so
         if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:

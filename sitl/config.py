@@ -251,6 +251,8 @@ class SimConfig:
     gcs_system_id: int = 255
     gcs_sysid_param: GcsSysidParam = "SYSID_MYGCS"
     camera: CameraConfig = field(default_factory=CameraConfig)
+    #: the MAVLink component each vehicle's tracking camera sends from (MAV_COMP_ID_CAMERA)
+    camera_component_id: int = 100
     wind: WindConfig = field(default_factory=WindConfig)
     boot_spacing_s: float = 3.7
     takeoff: Takeoff = "runway"
@@ -302,6 +304,11 @@ class SimConfig:
         if not 1 <= self.gcs_system_id <= 255:
             raise ValueError(f"gcs_system_id must be in 1..255, got {self.gcs_system_id!r}")
         _non_negative("boot_spacing_s", self.boot_spacing_s)
+        if not 2 <= self.camera_component_id <= 255:
+            raise ValueError(
+                "camera_component_id must be in 2..255 (1 is the autopilot), got "
+                f"{self.camera_component_id!r}"
+            )
         for name, value, allowed in (
             ("takeoff", self.takeoff, ("runway", "launch")),
             ("px4_offboard_speed", self.px4_offboard_speed, ("trim", "setpoint")),

@@ -136,10 +136,16 @@ class Px4Autopilot:
         self._offboard_min_wall_s = sim.offboard_timeout_min_wall_s
         self._setpoints = SilenceTimer()
         self._mode_entered_t_s = 0.0
+        self._reported_in_air = False
 
     @property
     def boot_mode(self) -> FlightMode:
         return HOLD
+
+    @property
+    def trim_throttle(self) -> float:
+        """FW_THR_TRIM: the throttle that holds trim airspeed in level flight (PX4 default)."""
+        return 0.6
 
     @property
     def stream_defaults(self) -> StreamTable:
@@ -162,6 +168,12 @@ class Px4Autopilot:
             out.append(v.statustext(mavlink.MAV_SEVERITY_WARNING, text))
             out.append(v.heartbeat())
             v.next_heartbeat_at(t_s + v.stream_interval_s(mavlink.MAVLINK_MSG_ID_HEARTBEAT))
+        in_air = v.landed_state_in_air
+        if in_air != self._reported_in_air:
+            # Commander on the land detector's change (already during the ground roll)
+            self._reported_in_air = in_air
+            text = "Takeoff detected" if in_air else "Landing detected"
+            out.append(v.statustext(mavlink.MAV_SEVERITY_INFO, text))
         if v.mode is TAKEOFF and self._takeoff_done(v, t_s):
             self._set_mode(v, HOLD, t_s)
             out.append(v.statustext(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding"))
@@ -340,7 +352,11 @@ class Px4Autopilot:
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             was_armed = v.armed
             result = self._arm_disarm(v, p[0] >= 0.5, as_int(p[1]) == ARM_DISARM_FORCE, t_s)
-            return result, ([v.heartbeat()] if v.armed != was_armed else [])
+            if v.armed == was_armed:
+                return result, []
+            # Commander::arm / disarm: "Armed by %s" with the reason, here a MAVLink command
+            text = "Armed by external command" if v.armed else "Disarmed by external command"
+            return result, [v.statustext(mavlink.MAV_SEVERITY_INFO, text), v.heartbeat()]
         if command == mavlink.MAV_CMD_DO_SET_MODE:
             return self._do_set_mode(v, as_int(p[0]), as_int(p[1]), as_int(p[2]), t_s, wall_s)
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:

@@ -35,7 +35,6 @@ from sitl.px4 import Px4Autopilot
 from sitl.target import TargetState
 from sitl.vehicle import (
     AUTOPILOT_COMPONENT,
-    CAMERA_COMPONENT,
     Autopilot,
     Outgoing,
     SimVehicle,
@@ -197,7 +196,7 @@ class SimulatorServer:
         system_id = index + 1
         encoders = {
             comp: mavlink.MAVLink(None, srcSystem=system_id, srcComponent=comp)
-            for comp in (AUTOPILOT_COMPONENT, CAMERA_COMPONENT)
+            for comp in (AUTOPILOT_COMPONENT, self.config.camera_component_id)
         }
         decoder = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=AUTOPILOT_COMPONENT)
         decoder.robust_parsing = True

@@ -143,23 +143,35 @@ def attitude_quaternion(state: FixedWingState, t_s: float) -> mavlink.MAVLink_me
 
 
 def local_position_ned(
-    state: FixedWingState, altitude_m: float, v_north_m_s: float, v_east_m_s: float, t_s: float
+    state: FixedWingState,
+    altitude_m: float,
+    v_north_m_s: float,
+    v_east_m_s: float,
+    t_s: float,
+    climb_m_s: float = 0.0,
 ) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_local_position_ned_message(
-        boot_ms(t_s), state.north_m, state.east_m, -altitude_m, v_north_m_s, v_east_m_s, 0.0
+        boot_ms(t_s), state.north_m, state.east_m, -altitude_m, v_north_m_s, v_east_m_s, -climb_m_s
     )
 
 
 def vfr_hud(
-    state: FixedWingState, ground_speed_m_s: float, in_air: bool, alt_amsl_m: float
+    state: FixedWingState,
+    ground_speed_m_s: float,
+    in_air: bool,
+    alt_amsl_m: float,
+    throttle: float = 0.6,
+    climb_m_s: float = 0.0,
 ) -> mavlink.MAVLink_message:
+    """Airspeed (the airframe's speed through the air) and ground speed (with the wind's
+    drift) apart, heading in degrees, throttle in percent (0 on the ground), climb up > 0."""
     return mavlink.MAVLink_vfr_hud_message(
         state.speed_m_s,
         ground_speed_m_s,
         round(math.degrees(heading_rad(state))) % 360,
-        60 if in_air else 0,
+        round(100.0 * throttle) if in_air else 0,
         alt_amsl_m,
-        0.0,
+        climb_m_s,
     )
 
 
@@ -170,6 +182,7 @@ def global_position_int(
     v_east_m_s: float,
     state: FixedWingState,
     t_s: float,
+    climb_m_s: float = 0.0,
 ) -> mavlink.MAVLink_message:
     lat, lon, alt = lla
     return mavlink.MAVLink_global_position_int_message(
@@ -180,7 +193,7 @@ def global_position_int(
         round(altitude_m * 1000.0),
         round(v_north_m_s * 100.0),
         round(v_east_m_s * 100.0),
-        0,
+        round(-climb_m_s * 100.0),  # vz: down > 0
         round(math.degrees(heading_rad(state)) * 100.0) % 36000,
     )
 

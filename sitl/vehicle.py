@@ -133,6 +133,11 @@ class Autopilot(Protocol):
         ...
 
     @property
+    def trim_throttle(self) -> float:
+        """The throttle (0..1) that holds cruise airspeed in level flight."""
+        ...
+
+    @property
     def stream_defaults(self) -> StreamTable:
         """The streams it sends without being asked (message id -> interval s; None: the
         simulator's telemetry rate; negative: only on request), and the set a message interval
@@ -258,6 +263,10 @@ class SimVehicle:
         self.last_observation: Observation | None = None
         self.wind_east_m_s = 0.0
         self.wind_north_m_s = 0.0
+        #: the rate of climb of the last physics step (m/s, up > 0)
+        self.climb_m_s = 0.0
+        #: the component id its tracking camera sends from (CAMERA_TRACKING_GEO_STATUS)
+        self.camera_component_id = sim.camera_component_id
 
     # ---- truth -------------------------------------------------------------------------------
 
@@ -303,6 +312,7 @@ class SimVehicle:
         """Check the failsafe at time ``t_s``, then fly one physics step of ``dt_s`` in the wind."""
         self.wind_east_m_s, self.wind_north_m_s = wind_east_m_s, wind_north_m_s
         out = self.autopilot.mode_events(self, t_s, wall_s)
+        self.climb_m_s = 0.0
         if self.rolling:
             self._roll(dt_s, t_s)
         elif self.in_air:
@@ -337,7 +347,28 @@ class SimVehicle:
     def _climb(self, dt_s: float) -> None:
         step_m = self.climb_rate_m_s * dt_s
         error = self.altitude_target_m - self.air_altitude_m
-        self.air_altitude_m += max(-step_m, min(step_m, error))
+        change_m = max(-step_m, min(step_m, error))
+        self.air_altitude_m += change_m
+        self.climb_m_s = change_m / dt_s
+
+    @property
+    def throttle(self) -> float:
+        """The throttle (0..1) a TECS-like energy controller would hold: the personality's
+        trim in level flight at cruise airspeed, more to fly faster, to climb (full throttle at
+        ``CLIMB_RATE_M_S``) and in a banked turn (lift 1/cos(bank) times the weight), less to
+        sink; full on the take-off roll, none on the ground."""
+        if self.rolling:
+            return 1.0
+        if not self.in_air:
+            return 0.0
+        lim = self.config.limits
+        trim = self.autopilot.trim_throttle
+        speed = (self.state.speed_m_s - self.cruise_speed_m_s) / (
+            lim.max_speed_m_s - lim.min_speed_m_s
+        )
+        climb = self.climb_m_s / CLIMB_RATE_M_S
+        bank = 1.0 / math.cos(telemetry.roll_rad(self.state)) - 1.0
+        return max(0.0, min(1.0, trim + 0.5 * speed + (1.0 - trim) * climb + 0.5 * bank))
 
     def _detect(self, dt_s: float) -> None:
         """The land detector's two low-pass filters (airspeed, ground speed)."""
@@ -484,8 +515,9 @@ class SimVehicle:
     ) -> list[Outgoing]:
         """A COMMAND_LONG (``frame`` None) or COMMAND_INT, answered with COMMAND_ACK."""
         requester = (msg.get_srcSystem(), msg.get_srcComponent())
-        if target_component == CAMERA_COMPONENT:
-            return [self._ack(command, mavlink.MAV_RESULT_UNSUPPORTED, requester, CAMERA_COMPONENT)]
+        camera = self.camera_component_id
+        if target_component == camera:
+            return [self._ack(command, mavlink.MAV_RESULT_UNSUPPORTED, requester, camera)]
         if target_component not in (0, AUTOPILOT_COMPONENT):
             return []
         served = self._serve(command, p, t_s)
@@ -571,7 +603,7 @@ class SimVehicle:
         """CAMERA_TRACKING_GEO_STATUS for an observation geolocated at (lat, lon, alt)."""
         self.observations_sent += 1
         self.last_observation = obs
-        return CAMERA_COMPONENT, telemetry.camera_tracking_geo_status(obs, lat, lon, alt)
+        return self.camera_component_id, telemetry.camera_tracking_geo_status(obs, lat, lon, alt)
 
     def _message_by_id(
         self, msg_id: int, t_s: float, geo: GeoLookup | None = None
@@ -605,14 +637,19 @@ class SimVehicle:
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
             return telemetry.attitude_quaternion(s, t_s)
         v_north, v_east = self._ground_velocity()
+        climb = self.climb_m_s
         if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            return telemetry.local_position_ned(s, self.altitude_m, v_north, v_east, t_s)
+            return telemetry.local_position_ned(s, self.altitude_m, v_north, v_east, t_s, climb)
         if msg_id == mavlink.MAVLINK_MSG_ID_VFR_HUD:
             ground_speed = math.hypot(v_north, v_east)
             alt_amsl = self._sim.origin_alt_m + self.altitude_m
-            return telemetry.vfr_hud(s, ground_speed, self.in_air or self.rolling, alt_amsl)
+            return telemetry.vfr_hud(
+                s, ground_speed, self.in_air or self.rolling, alt_amsl, self.throttle, climb
+            )
         if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            return telemetry.global_position_int(geo(), self.altitude_m, v_north, v_east, s, t_s)
+            return telemetry.global_position_int(
+                geo(), self.altitude_m, v_north, v_east, s, t_s, climb
+            )
         if msg_id == mavlink.MAVLINK_MSG_ID_GPS_RAW_INT:
             return telemetry.gps_raw_int(geo(), v_north, v_east, t_s)
         return None

@@ -177,6 +177,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             physics_dt_s=cfg.sim.physics_dt_s,
             telemetry_rate_hz=cfg.sim.telemetry_rate_hz,
             camera=cfg.sim.camera.build(),
+            camera_component_id=cfg.link.camera_component_id,
             wind=cfg.sim.wind.build(),
             # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a
             # scheduling hiccup of a loaded machine at a speed-up, trip the offboard failsafe
