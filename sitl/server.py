@@ -211,14 +211,21 @@ class SimulatorServer:
             for link in self._links:
                 port = self.config.bind_base_port
                 local = (self.config.bind_host, 0 if port is None else port + link.index)
-                transport, _ = await loop.create_datagram_endpoint(
-                    functools.partial(
-                        _Protocol,
-                        functools.partial(self._on_datagram, link),
-                        functools.partial(self._on_socket_error, link),
-                    ),
-                    local_addr=local,
-                )
+                try:
+                    transport, _ = await loop.create_datagram_endpoint(
+                        functools.partial(
+                            _Protocol,
+                            functools.partial(self._on_datagram, link),
+                            functools.partial(self._on_socket_error, link),
+                        ),
+                        local_addr=local,
+                    )
+                except OSError as exc:  # the port, not only "Address already in use"
+                    raise OSError(
+                        exc.errno,
+                        f"vehicle {link.system_id}: cannot bind UDP {local[0]}:{local[1]}: "
+                        f"{exc.strerror or exc}",
+                    ) from exc
                 stack.callback(transport.close)
                 _enlarge_receive_buffer(transport)
                 link.transport = transport

@@ -23,7 +23,7 @@ from typing import TextIO
 
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan, sim_config
-from app.errors import LinkError
+from app.errors import LinkError, StandoffError
 from sitl.config import SimConfig
 from sitl.server import SimulatorServer
 
@@ -35,8 +35,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--vehicles", type=int)
     args = parser.parse_args(argv)
     config = MissionConfig.model_validate_json(args.config.read_text(encoding="utf-8"))
-    plan = build_plan(config, args.vehicles)
-    return asyncio.run(serve(sim_config(plan, args.base_port), None, sys.stdout))
+    try:
+        plan = build_plan(config, args.vehicles)
+        return asyncio.run(serve(sim_config(plan, args.base_port), None, sys.stdout))
+    except StandoffError as exc:  # the reason, as the last line of simulator.log
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        return 2
 
 
 @contextlib.asynccontextmanager
@@ -67,12 +71,10 @@ async def simulator_process(
                 while True:
                     line = await proc.stdout.readline()
                     if not line:
-                        err = b"" if proc.stderr is None else await proc.stderr.read()
+                        code = await proc.wait()
                         raise LinkError(
                             "the built-in simulator did not start: "
-                            + (err.decode(errors="replace").strip().splitlines() or ["no output"])[
-                                -1
-                            ]
+                            + failure_reason(log_path, code)
                         )
                     if line.startswith(b"running"):
                         break
@@ -91,6 +93,18 @@ async def simulator_process(
         log_file.close()
         with contextlib.suppress(OSError):
             path.unlink()
+
+
+def failure_reason(log_path: Path, exit_code: int | None) -> str:
+    """Why the simulator process stopped: the last line of its log (its error, or the last
+    line of a traceback), else its exit code."""
+    try:
+        lines = log_path.read_text(encoding="utf-8", errors="replace").strip().splitlines()
+    except OSError:
+        lines = []
+    if lines:
+        return f"{lines[-1].strip()} (see {log_path})"
+    return f"it exited with code {exit_code} and wrote nothing to {log_path}"
 
 
 async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int:
@@ -118,7 +132,7 @@ async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int
                 flush=True,
             )
     except OSError as exc:  # a vehicle socket that cannot be bound (port taken, bad host)
-        raise LinkError(f"cannot open the vehicle sockets: {exc}") from exc
+        raise LinkError(f"cannot open the vehicle sockets: {exc}") from exc  # names the port
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
