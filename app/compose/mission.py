@@ -34,6 +34,7 @@ from app.compose.parts import (
 )
 from app.compose.simulator import simulator_process
 from app.config.plan import MissionPlan
+from app.errors import ConfigError
 from app.runtime.agent import VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundStation, Measurement
@@ -84,6 +85,11 @@ class Mission:
         # a bad URL is a ConfigError here, before anything is started or written
         for url in self.urls:
             validate_url(url)
+        if len(self.urls) not in (0, 1, plan.count):
+            raise ConfigError(
+                f"{len(self.urls)} vehicle URLs for {plan.count} vehicles: give one URL that "
+                f"carries them all or one per vehicle ({plan.count})"
+            )
         if self.broker_url is not None:
             BrokerUrl.parse(self.broker_url)
         self.links: dict[int, VehicleLink] = {}

@@ -16,9 +16,11 @@ from app.config.schema import (
     Finite,
     GuidanceConfig,
     LimitsConfig,
+    LocalPosition,
     NonNegative,
     PhaseConfig,
     Positive,
+    Speedup,
     StrictModel,
     TargetConfig,
 )
@@ -63,8 +65,8 @@ class MissionPhaseConfig(PhaseConfig):
 class StandbyConfig(StrictModel):
     """Where the team loiters until the tracking command (metres about the origin)."""
 
-    east_m: Finite
-    north_m: Finite
+    east_m: LocalPosition
+    north_m: LocalPosition
     radius_m: Positive = 150.0
 
 
@@ -167,7 +169,7 @@ class SimSettings(StrictModel):
     4.6; docs/simulator.md)."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
-    speedup: Positive = 3.0
+    speedup: Speedup = 3.0
     seed: Annotated[int, Field(ge=0)] = 1
     base_port: Annotated[int, Field(ge=1024, le=65000)] = 14540
     physics_dt_s: Annotated[float, Field(gt=0.0, le=0.1)] = 0.02

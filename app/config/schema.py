@@ -16,6 +16,13 @@ from sitl.target import Leg, Maneuver, TargetPath
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+MAX_LOCAL_M = 1.0e6
+"""How far from the mission's origin a position in the local frame may be, m (1000 km: the
+flat local frame means nothing further; the estimators refuse fixes beyond it too)."""
+LocalPosition = Annotated[float, Field(ge=-MAX_LOCAL_M, le=MAX_LOCAL_M, allow_inf_nan=False)]
+Speedup = Annotated[float, Field(gt=0.0, le=100.0, allow_inf_nan=False)]
+"""Simulated seconds per host second: above 100 the 10 Hz telemetry and 50 Hz physics alone
+ask for more than one core can give (the loops fall behind and the figures mean nothing)."""
 
 
 class StrictModel(BaseModel):
@@ -60,8 +67,8 @@ class LimitsConfig(StrictModel):
 class VehicleStartConfig(StrictModel):
     """Where a vehicle starts: metres east/north of the origin, course in degrees from north."""
 
-    east_m: Finite
-    north_m: Finite
+    east_m: LocalPosition
+    north_m: LocalPosition
     course_deg: Finite
     speed_m_s: Positive
 
@@ -75,8 +82,8 @@ class VehicleStartConfig(StrictModel):
 
 
 class LegConfig(StrictModel):
-    to_east_m: Finite
-    to_north_m: Finite
+    to_east_m: LocalPosition
+    to_north_m: LocalPosition
     speed_m_s: NonNegative | None = None
     accel_m_s2: Positive = 1.0
     max_speed_m_s: Positive = 30.0
@@ -107,8 +114,8 @@ class WaypointTargetConfig(StrictModel):
     """A target that waits at its start, then drives leg after leg (section 5.2's A-B-C-D)."""
 
     kind: Literal["waypoints"] = "waypoints"
-    start_east_m: Finite = 0.0
-    start_north_m: Finite = 0.0
+    start_east_m: LocalPosition = 0.0
+    start_north_m: LocalPosition = 0.0
     wait_s: NonNegative = 0.0
     legs: list[LegConfig] = Field(min_length=1)
 
@@ -126,8 +133,8 @@ class ManeuverTargetConfig(StrictModel):
     """A target that runs timed manoeuvres from a start state (the Fig. 12-like path)."""
 
     kind: Literal["maneuvers"]
-    start_east_m: Finite = 0.0
-    start_north_m: Finite = 0.0
+    start_east_m: LocalPosition = 0.0
+    start_north_m: LocalPosition = 0.0
     start_course_deg: Finite = 0.0
     start_speed_m_s: NonNegative = 0.0
     maneuvers: list[ManeuverConfig] = Field(min_length=1)
@@ -147,8 +154,8 @@ class StationaryTargetConfig(StrictModel):
     """A target that stands still at a point."""
 
     kind: Literal["stationary"]
-    east_m: Finite = 0.0
-    north_m: Finite = 0.0
+    east_m: LocalPosition = 0.0
+    north_m: LocalPosition = 0.0
 
     def build(self, dt_s: float = 0.01) -> TargetPath:
         return TargetPath.from_maneuvers(self.east_m, self.north_m, 0.0, 0.0, [Maneuver(1.0)], dt_s)

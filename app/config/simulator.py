@@ -13,6 +13,7 @@ from app.config.schema import (
     LimitsConfig,
     NonNegative,
     Positive,
+    Speedup,
     StrictModel,
     TargetConfig,
     VehicleStartConfig,
@@ -107,7 +108,7 @@ class SitlScenario(StrictModel):
     network: NetworkConfig = NetworkConfig()
     camera: CameraModel = CameraModel()
     wind: WindModel = WindModel()
-    speedup: Positive = 1.0
+    speedup: Speedup = 1.0
     seed: Annotated[int, Field(ge=0)] = 0
     physics_dt_s: Annotated[float, Field(gt=0.0, le=0.1, allow_inf_nan=False)] = 0.02
     telemetry_rate_hz: Positive = 10.0

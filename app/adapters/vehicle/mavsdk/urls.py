@@ -15,7 +15,10 @@ def validate_url(url: str) -> str:
     """A MAVSDK connection URL, checked: ``udpin://host:port``, ``udpout://host:port``,
     ``tcp(in|out)://host:port`` (``tcp://`` is deprecated in 4.1 but works) or
     ``serial:///dev/tty...:baud``. Raises ``ConfigError`` with the bad URL otherwise."""
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except ValueError as exc:  # e.g. an unclosed IPv6 bracket: one line, not a traceback
+        raise ConfigError(f"vehicle URL {url!r}: {exc}") from None
     if parts.scheme not in URL_SCHEMES:
         raise ConfigError(
             f"vehicle URL {url!r}: scheme must be one of {', '.join(URL_SCHEMES)} "
