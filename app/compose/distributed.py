@@ -337,6 +337,8 @@ async def run_ground(
                 replay=replay,
                 on_snapshot=on_snapshot,
                 name=GROUND_CLIENT,
+                # its own mission clock: statuses are judged by it, never move it (#14)
+                clock=MissionClock(epoch.epoch_s, epoch.rate, clock.time_s).now_s,
             )
             notify(f"ground station ready on {_broker_name(broker_url)}: waiting for the agents")
             shutdown = _Shutdown(bus, ground, presence, events, notify)
