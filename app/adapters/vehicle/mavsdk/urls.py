@@ -95,7 +95,8 @@ def parse_gcs_endpoint(spec: str) -> UdpEndpoint:
             text = text[len(prefix) :]
             break
     host, sep, port = text.rpartition(":")
-    if not sep or not host or not port.isdigit():
+    bracketed = host.startswith("[") and host.endswith("]")  # an IPv6 address
+    if not sep or not host or not port.isdigit() or (":" in host and not bracketed):
         raise ConfigError(
             f"ground station endpoint {spec!r}: expected HOST:PORT, udpout:HOST:PORT or "
             "udpin:HOST:PORT (e.g. udpout:127.0.0.1:14550)"
