@@ -2,18 +2,22 @@
 
 One JSON object a line, in the order the mission's loops consumed them (``InputRecorder``):
 
-- ``{"kind": "header", "schema": 1, "vehicles": n, "truth": true}``: first line; ``truth``
-  says whether the run scored its figures against the scripted target (the built-in simulator
-  or simulated observations) or about the estimate;
+- ``{"kind": "header", "schema": 1, "vehicles": n, "truth": true, "role": "mission"}``: first
+  line; ``truth`` says whether the run scored its figures against the scripted target (the
+  built-in simulator or simulated observations) or about the estimate; ``role`` who wrote it:
+  ``mission`` (``standoff fly``: everything, one file), ``ground`` or ``agent-<i>`` (the
+  processes of ``standoff ground`` / ``standoff agent``, each its own
+  ``observations-<role>.jsonl``);
 - ``{"kind": "observation", "vehicle": i, "t_s", "east_m", "north_m", "sigma_m"}``: a target
   fix as agent ``i`` fed it to its local filter, before estimation (the camera's, after the
   backlog merge, or one the ground sent; ``sigma_m`` null: the filter's default);
 - ``{"kind": "fused", "vehicle": i, "t_s"}``: agent ``i`` applied the fused estimate of ``t_s``;
 - ``{"kind": "status", "vehicle": i, "t_s", "east_m", "north_m", "course_rad", "speed_m_s",
-  "link_ok", "healthy"}``: the ground station took vehicle ``i``'s status (the vehicle state
-  that the fusion, the stages and the recorded samples use);
-- ``{"kind": "local", "vehicle": i, "t_s"}``: the ground took agent ``i``'s local estimate of
-  ``t_s``.
+  "link_ok", "healthy", "clock_t_s"}``: the ground station took vehicle ``i``'s status (the
+  vehicle state that the fusion, the stages and the recorded samples use); ``clock_t_s`` its
+  own mission clock then, which it judges message times by (null: none);
+- ``{"kind": "local", "vehicle": i, "t_s", "clock_t_s"}``: the ground took agent ``i``'s local
+  estimate of ``t_s``.
 
 Times are mission seconds; positions m east/north of the mission origin; courses rad clockwise
 from north. Numbers are written in full (``repr``), so a replay is fed exactly what the run was.
@@ -33,6 +37,14 @@ from app.core.mission.ground import VehicleReport
 log = logging.getLogger(__name__)
 
 OBSERVATIONS_FILE = "observations.jsonl"
+
+
+def observations_file(role: str) -> str:
+    """The file of one process of a mission: ``observations.jsonl`` for the whole mission in one
+    process, ``observations-<role>.jsonl`` for the ground's or an agent's."""
+    return OBSERVATIONS_FILE if role == "mission" else f"observations-{role}.jsonl"
+
+
 SCHEMA = 1
 
 
@@ -41,14 +53,24 @@ def _number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def _clock(value: float | None) -> float | None:
+    return None if value is None else _number(value)
+
+
 class ObservationLog:
     """Writes ``observations.jsonl`` (an ``InputRecorder``); a context manager."""
 
-    def __init__(self, path: Path, vehicles: int, *, truth: bool) -> None:
+    def __init__(self, path: Path, vehicles: int, *, truth: bool, role: str = "mission") -> None:
         self.path = path
         self.lines = 0
         self.failed: str | None = None
-        self._header = {"kind": "header", "schema": SCHEMA, "vehicles": vehicles, "truth": truth}
+        self._header = {
+            "kind": "header",
+            "schema": SCHEMA,
+            "vehicles": vehicles,
+            "truth": truth,
+            "role": role,
+        }
         self._file: IO[str] | None = None
 
     def __enter__(self) -> Self:
@@ -103,7 +125,7 @@ class ObservationLog:
     def fused(self, vehicle: int, t_s: float) -> None:
         self._write({"kind": "fused", "vehicle": vehicle, "t_s": t_s})
 
-    def status(self, vehicle: int, report: VehicleReport) -> None:
+    def status(self, vehicle: int, report: VehicleReport, clock_t_s: float | None) -> None:
         self._write(
             {
                 "kind": "status",
@@ -115,8 +137,11 @@ class ObservationLog:
                 "speed_m_s": _number(report.speed_m_s),
                 "link_ok": report.link_ok,
                 "healthy": report.healthy,
+                "clock_t_s": _clock(clock_t_s),
             }
         )
 
-    def local(self, vehicle: int, t_s: float) -> None:
-        self._write({"kind": "local", "vehicle": vehicle, "t_s": t_s})
+    def local(self, vehicle: int, t_s: float, clock_t_s: float | None) -> None:
+        self._write(
+            {"kind": "local", "vehicle": vehicle, "t_s": t_s, "clock_t_s": _clock(clock_t_s)}
+        )

@@ -52,7 +52,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from app.adapters.observations_log import OBSERVATIONS_FILE
     from app.cli.fly import report
     from app.config.estimator import EstimatorConfig
     from app.config.loading import load_config
@@ -69,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if args.estimator is not None:
         estimator = load_config(args.estimator, EstimatorConfig)
     plan = rp.replay_plan(mission, estimator)
-    recording = rp.read_recording(run_dir / OBSERVATIONS_FILE)
+    recording = rp.read_run_recording(run_dir)
     started = time.perf_counter()
     result = rp.replay(plan, recording)
     elapsed = time.perf_counter() - started

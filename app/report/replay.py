@@ -38,6 +38,7 @@ from app.runtime.ground import GroundRuntimeParams
 
 OBSERVATIONS_SCHEMA = 1
 KINDS = ("observation", "fused", "status", "local")
+AGENT_KINDS = ("observation", "fused")  # what an agent was fed; the others the ground took
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,12 +108,43 @@ def read_recording(path: Path) -> Recording:
             raise InputError(f"{where}: 'vehicle' must be 0..{header['vehicles'] - 1}")
         if not math.isfinite(_number(record, "t_s", where)):
             raise InputError(f"{where}: 't_s' must be a finite number")
-        for name in ("east_m", "north_m", "sigma_m", "course_rad", "speed_m_s"):
+        for name in ("east_m", "north_m", "sigma_m", "course_rad", "speed_m_s", "clock_t_s"):
             _number(record, name, where)
         records.append(record)
     if header is None:
         raise InputError(f"{path}: empty (no header)")
     return Recording(header["vehicles"], bool(header.get("truth")), tuple(records))
+
+
+def read_run_recording(run_dir: Path) -> Recording:
+    """A run folder's recording: ``observations.jsonl`` (one process: ``standoff fly``), or the
+    ground's and each agent's (``observations-<role>.jsonl`` of ``standoff ground`` and
+    ``standoff agent`` writing to one folder), merged. Each part of the mission must be in one
+    file only."""
+    paths = sorted(run_dir.glob("observations*.jsonl"))
+    if not paths:
+        raise InputError(
+            f"{run_dir}: no observations.jsonl (runs flown before observations were recorded "
+            "cannot be replayed)"
+        )
+    parts = [read_recording(path) for path in paths]
+    vehicles = {part.vehicles for part in parts}
+    if len(vehicles) != 1:
+        raise InputError(f"{run_dir}: recordings of different teams ({sorted(vehicles)} vehicles)")
+    owners: dict[tuple[str, int], Path] = {}
+    for path, part in zip(paths, parts, strict=True):
+        for record in part.records:
+            actor = ("agent", record["vehicle"]) if record["kind"] in AGENT_KINDS else ("ground", 0)
+            if owners.setdefault(actor, path) != path:
+                raise InputError(
+                    f"{run_dir}: {path.name} and {owners[actor].name} both hold the "
+                    f"{actor[0]}{'' if actor[0] == 'ground' else f' {actor[1]}'}'s inputs"
+                )
+    return Recording(
+        vehicles.pop(),
+        any(part.truth for part in parts),
+        tuple(record for part in parts for record in part.records),
+    )
 
 
 def replay_plan(mission: MissionConfig, estimator: EstimatorConfig) -> MissionPlan:
@@ -160,6 +192,12 @@ def _observation(record: Mapping[str, Any], sensor: str) -> Observation:
     )
 
 
+def _clock(record: Mapping[str, Any]) -> float | None:
+    """The ground's clock when it took the record (None: it had none)."""
+    value = record.get("clock_t_s")
+    return None if value is None else float(value)
+
+
 def _report(record: Mapping[str, Any]) -> ground_logic.VehicleReport:
     return ground_logic.VehicleReport(
         float(record["t_s"]),
@@ -172,6 +210,82 @@ def _report(record: Mapping[str, Any]) -> ground_logic.VehicleReport:
     )
 
 
+class _Replay:
+    """The replay's state: each agent's and the ground's, and the estimates they passed."""
+
+    def __init__(
+        self,
+        plan: MissionPlan,
+        truth: bool,
+        aruntime: AgentRuntimeParams,
+        gruntime: GroundRuntimeParams,
+    ) -> None:
+        self.plan = plan
+        self.agents = {a.vehicle: a for a in plan.agents}
+        self.states = {
+            v: agent_logic.initial_agent_state(
+                a, aruntime.estimate_period_s, aruntime.status_period_s
+            )
+            for v, a in self.agents.items()
+        }
+        self.gstate = ground_logic.initial_ground_state(
+            gruntime.tick_period_s, gruntime.mission_period_s
+        )
+        self.end_t_s = gruntime.end_t_s
+        self.truth = plan.target if truth else None
+        self.locals: dict[tuple[int, float], LocalEstimate] = {}
+        self.fused: dict[float, GlobalEstimate] = {}
+        self.samples: list[TeamSample] = []
+        self.events: list[ground_logic.GroundEvent] = []
+        self.fed = dict.fromkeys(KINDS, 0)
+        self.unmatched = dict.fromkeys(("local", "fused"), 0)
+        self.done = False
+
+    def agent(self, v: int, record: Mapping[str, Any]) -> None:
+        """One of agent ``v``'s records: an observation into its filter, a fused estimate
+        applied; a local estimate it makes is kept for the ground as the bus would carry it."""
+        params = self.agents[v]
+        if record["kind"] == "observation":
+            obs = agent_logic.Observed(_observation(record, params.sensor))
+            self.states[v], out = agent_logic.step(self.states[v], obs, params)
+            if out.estimate is not None:
+                sent = wire.local_to_bus(out.estimate, v, f"agent-{v}")
+                self.locals[(v, sent.t_s)] = wire.local_to_core(sent)
+        else:
+            estimate = self.fused.get(float(record["t_s"]))
+            if estimate is None:
+                self.unmatched["fused"] += 1
+                return
+            heard = agent_logic.HeardFused(estimate)
+            self.states[v], _ = agent_logic.step(self.states[v], heard, params)
+        self.fed[record["kind"]] += 1
+
+    def ground(self, record: Mapping[str, Any], local: LocalEstimate | None) -> None:
+        """One of the ground's records: a status (which may tick: fusion, stage, sample), or
+        the local estimate ``local`` (None: the agent made none such, counted)."""
+        if self.done:
+            return  # the station stopped at the end
+        v, params = int(record["vehicle"]), self.plan.ground
+        if record["kind"] == "local":
+            if local is None:
+                self.unmatched["local"] += 1
+                return
+            heard_local = ground_logic.HeardLocal(local, _clock(record))
+            self.gstate, _ = ground_logic.step(self.gstate, heard_local, params)
+        else:
+            heard = ground_logic.HeardStatuses(((v, _report(record)),), _clock(record))
+            self.gstate, out = ground_logic.step(self.gstate, heard, params, self.truth)
+            self.events.extend(out.events)
+            if out.fused is not None:
+                bus = wire.global_to_bus(out.fused, "ground")
+                self.fused[out.fused.t_s] = wire.global_to_core(bus)
+            if out.sample is not None:
+                self.samples.append(out.sample)
+            if out.tick_t_s is not None and out.tick_t_s >= self.end_t_s:
+                self.done = True
+        self.fed[record["kind"]] += 1
+
+
 def replay(
     plan: MissionPlan,
     recording: Recording,
@@ -179,73 +293,53 @@ def replay(
     ground_runtime: GroundRuntimeParams | None = None,
 ) -> ReplayResult:
     """Re-run every agent's local filter and the ground's fusion and stages on the recorded
-    inputs (the module docstring); the loops' periods are those the live mission runs with."""
+    inputs (the module docstring); the loops' periods are those the live mission runs with.
+
+    Each agent's records and the ground's are replayed in their own order; across them the
+    replay follows the data: the ground's record of a local estimate first runs that agent's
+    records until it has made the estimate. In one process's recording this is the order the
+    file has; across processes (one file each) it is the order causality allows, and the
+    result is the same, since an agent only waits for fused estimates the ground made before
+    it took the agent's next local estimate."""
     if recording.vehicles != plan.count:
         raise InputError(
             f"the recording has {recording.vehicles} vehicles, its config {plan.count}"
         )
-    aruntime = agent_runtime or AgentRuntimeParams()
-    gruntime = ground_runtime or GroundRuntimeParams(end_t_s=plan.end_t_s)
-    agents = {a.vehicle: a for a in plan.agents}
-    states = {
-        v: agent_logic.initial_agent_state(a, aruntime.estimate_period_s, aruntime.status_period_s)
-        for v, a in agents.items()
+    run = _Replay(
+        plan,
+        recording.truth,
+        agent_runtime or AgentRuntimeParams(),
+        ground_runtime or GroundRuntimeParams(end_t_s=plan.end_t_s),
+    )
+    pending: dict[int, Iterator[Mapping[str, Any]]] = {
+        v: iter([r for r in recording.records if r["vehicle"] == v and r["kind"] in AGENT_KINDS])
+        for v in run.agents
     }
-    gstate = ground_logic.initial_ground_state(gruntime.tick_period_s, gruntime.mission_period_s)
-    truth = plan.target if recording.truth else None
-    locals_: dict[tuple[int, float], LocalEstimate] = {}
-    fused: dict[float, GlobalEstimate] = {}
-    samples: list[TeamSample] = []
-    events: list[ground_logic.GroundEvent] = []
-    fed = dict.fromkeys(KINDS, 0)
-    unmatched = dict.fromkeys(("local", "fused"), 0)
-    done = False
     for record in recording.records:
-        kind, v = record["kind"], int(record["vehicle"])
-        t = float(record["t_s"])
-        if kind == "observation":
-            obs = _observation(record, agents[v].sensor)
-            states[v], out = agent_logic.step(states[v], agent_logic.Observed(obs), agents[v])
-            if out.estimate is not None:
-                # what the ground receives: the live mission's own bus conversion
-                sent = wire.local_to_bus(out.estimate, v, f"agent-{v}")
-                locals_[(v, sent.t_s)] = wire.local_to_core(sent)
-        elif kind == "fused":
-            estimate = fused.get(t)
-            if estimate is None:
-                unmatched["fused"] += 1
-                continue
-            states[v], _ = agent_logic.step(states[v], agent_logic.HeardFused(estimate), agents[v])
-        elif done:
-            continue  # the station stopped at the end; the agents ran on a little
-        elif kind == "local":
-            local = locals_.pop((v, t), None)
-            if local is None:
-                unmatched["local"] += 1
-                continue
-            gstate, _ = ground_logic.step(gstate, ground_logic.HeardLocal(local), plan.ground)
-        else:  # status
-            heard = ground_logic.HeardStatuses(((v, _report(record)),))
-            gstate, gout = ground_logic.step(gstate, heard, plan.ground, truth)
-            events.extend(gout.events)
-            if gout.fused is not None:
-                fused[gout.fused.t_s] = wire.global_to_core(
-                    wire.global_to_bus(gout.fused, "ground")
-                )
-            if gout.sample is not None:
-                samples.append(gout.sample)
-            if gout.tick_t_s is not None and gout.tick_t_s >= gruntime.end_t_s:
-                done = True
-        fed[kind] += 1
-    ground = plan.ground
+        if record["kind"] in AGENT_KINDS:
+            continue
+        local = None
+        if record["kind"] == "local":
+            key = (int(record["vehicle"]), float(record["t_s"]))
+            agent_records = pending[key[0]]
+            while key not in run.locals:
+                nxt = next(agent_records, None)
+                if nxt is None:
+                    break
+                run.agent(key[0], nxt)
+            local = run.locals.pop(key, None)
+        run.ground(record, local)
+    for v, rest in pending.items():  # what the agents were fed after the ground's last need
+        for record in rest:
+            run.agent(v, record)
     summary = summarize(
-        samples,
+        run.samples,
         plan.config.radius_m,
         plan.config.tracking_command_s,
-        ground.stages.radius_tolerance_m,
-        ground.stages.spacing_tolerance_rad,
+        plan.ground.stages.radius_tolerance_m,
+        plan.ground.stages.spacing_tolerance_rad,
     )
-    return ReplayResult(samples, events, summary, fed, unmatched)
+    return ReplayResult(run.samples, run.events, summary, run.fed, run.unmatched)
 
 
 def recorded_stages(events_path: Path) -> list[tuple[float, str]]:

@@ -294,9 +294,10 @@ class GroundStation:
                     # its agent is told to resume
                     healthy=message.healthy and message.control != "pilot",
                 )
+                now = self._now()
                 if self._recorder is not None:
-                    self._recorder.status(message.vehicle, report)
-                heard = logic.HeardStatuses(((message.vehicle, report),), self._now())
+                    self._recorder.status(message.vehicle, report, now)
+                heard = logic.HeardStatuses(((message.vehicle, report),), now)
                 self.state, out = logic.step(self.state, heard, self.params, self._truth)
                 if out.refused:
                     self._fault("status_refused", f"{message.sender}: t_s {message.t_s!r}")
@@ -308,7 +309,7 @@ class GroundStation:
             case bus.LocalEstimate():
                 local = logic.HeardLocal(local_to_core(message), self._now())
                 if self._recorder is not None:
-                    self._recorder.local(message.vehicle, message.t_s)
+                    self._recorder.local(message.vehicle, message.t_s, local.clock_t_s)
                 self.state, out = logic.step(self.state, local, self.params)
                 if out.refused:
                     self._fault("local_estimate_refused", f"{message.sender} at {message.t_s!r}")
@@ -327,7 +328,7 @@ class GroundStation:
                 message.t_s,
                 vehicle=v,
                 flight_mode=message.flight_mode,
-                detail=f"vehicle {v} is flown by its pilot ({message.flight_mode}): out of the "
+                detail=f"vehicle {v + 1} is flown by its pilot ({message.flight_mode}): out of the "
                 "formation, not lost",
             )
         else:

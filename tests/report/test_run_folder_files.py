@@ -31,8 +31,8 @@ def test_observations_round_trip_exactly(tmp_path: Path) -> None:
     report = VehicleReport(3.3, 1.0 / 3.0, 2.0, 0.7, 14.000000000000002, link_ok=False)
     with ObservationLog(path, 2, truth=True) as log:
         log.observation(1, obs)
-        log.status(0, report)
-        log.local(1, 12.4)
+        log.status(0, report, 3.25)
+        log.local(1, 12.4, None)
         log.fused(0, 12.6)
     recording = read_recording(path)
     assert recording.vehicles == 2
@@ -45,6 +45,8 @@ def test_observations_round_trip_exactly(tmp_path: Path) -> None:
     assert first["sigma_m"] is None
     assert status["north_m"] == 2.0
     assert status["east_m"] == 1.0 / 3.0
+    assert status["clock_t_s"] == 3.25
+    assert recording.records[2]["clock_t_s"] is None
     assert status["link_ok"] is False
     assert status["healthy"] is True
 

@@ -20,8 +20,10 @@ class InputRecorder(Protocol):
     def fused(self, vehicle: int, t_s: float) -> None:
         """Agent ``vehicle`` applies the fused estimate of mission time ``t_s``."""
 
-    def status(self, vehicle: int, report: VehicleReport) -> None:
-        """The ground station takes vehicle ``vehicle``'s status ``report``."""
+    def status(self, vehicle: int, report: VehicleReport, clock_t_s: float | None) -> None:
+        """The ground station takes vehicle ``vehicle``'s status ``report``, its own mission
+        clock reading ``clock_t_s`` then (None: it has none)."""
 
-    def local(self, vehicle: int, t_s: float) -> None:
-        """The ground station takes vehicle ``vehicle``'s local estimate of time ``t_s``."""
+    def local(self, vehicle: int, t_s: float, clock_t_s: float | None) -> None:
+        """The ground station takes vehicle ``vehicle``'s local estimate of time ``t_s``, its
+        clock reading ``clock_t_s`` then."""
