@@ -4,6 +4,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.cli._login import add_login_options
 from app.cli._options import add_mission_options
 
 ORDER = 13
@@ -29,9 +30,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         metavar="I",
         help="which vehicle, 0-based (MAVLink system id I+1)",
     )
-    add_mission_options(
-        p, "MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')"
-    )
+    add_mission_options(p, "MQTT broker, mqtt[s]://host:port (default: the config's 'bus')")
+    add_login_options(p)
     p.add_argument(
         "--connect",
         metavar="URL",
@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from app.adapters.vehicle.mavsdk.urls import validate_url
+    from app.cli._login import bus_options
     from app.cli._options import broker_url, with_overrides
     from app.compose.distributed import agent_url, run_agent
     from app.config import load_config
@@ -65,13 +66,23 @@ def run(args: argparse.Namespace) -> int:
     vehicle: int = args.vehicle
     connect = validate_url(agent_url(plan, vehicle, args.connect, config.sim.base_port))
     builtin = args.connect is None and not config.link.connect
+    options = bus_options(args, config, f"agent-{vehicle}")
     out = args.out or Path("runs") / f"{config.name}-agent-{vehicle}"
 
     def notify(line: str) -> None:
         print(f"standoff agent: {line}", flush=True)
 
     result = asyncio.run(
-        run_agent(plan, vehicle, url, connect, out, builtin_simulator=builtin, notify=notify)
+        run_agent(
+            plan,
+            vehicle,
+            url,
+            connect,
+            out,
+            builtin_simulator=builtin,
+            notify=notify,
+            bus_options=options,
+        )
     )
     where = f"vehicle {vehicle + 1} {'in hold' if result.held else 'hold not confirmed'}"
     if result.stopped_by is not None:

@@ -5,6 +5,7 @@ import contextlib
 import sys
 from pathlib import Path
 
+from app.cli._login import add_login_options
 from app.cli._options import add_mission_options
 
 ORDER = 12
@@ -23,9 +24,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "simulator for the mission; otherwise the vehicles are elsewhere."
         ),
     )
-    add_mission_options(
-        p, "MQTT broker, mqtt://[user:pass@]host:port (default: the config's 'bus')"
-    )
+    add_mission_options(p, "MQTT broker, mqtt[s]://host:port (default: the config's 'bus')")
+    add_login_options(p)
     p.add_argument("--out", type=Path, help="run folder (default: a new folder under runs/)")
     p.add_argument(
         "--sitl",
@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from app.adapters.live_view import LiveView
+    from app.cli._login import bus_options
     from app.cli._options import broker_url, with_overrides
     from app.cli.fly import default_out_dir, report
     from app.compose.distributed import run_ground
@@ -51,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
+    options = bus_options(args, config, "ground")
     plan = build_plan(config)
     out = args.out or default_out_dir(config.name)
     base_port = config.sim.base_port
@@ -71,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
                 sitl_base_port=base_port if args.sitl else None,
                 on_snapshot=view.update if view is not None else None,
                 notify=notify,
+                bus_options=options,
             )
         )
     console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)

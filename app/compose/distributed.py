@@ -29,7 +29,7 @@ import json
 import logging
 import math
 import signal
-from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,7 +64,7 @@ from app.runtime.vehicle import prepare_vehicle
 
 log = logging.getLogger(__name__)
 
-GROUND_CLIENT = "ground"
+GROUND_CLIENT = topics.GROUND
 SHUTDOWN_GRACE_S = 15.0  # wall time the ground waits for the agents to hold and go offline
 HOLD_TIMEOUT_S = 5.0  # wall time a stopping agent waits for its vehicle to accept the hold
 EPOCH_TIMEOUT_S = 120.0  # wall time an agent waits for the ground station's mission epoch
@@ -169,7 +169,12 @@ def _broker_name(url: str) -> str:
 # --- on the bus: presence and reconnections ---------------------------------------------------
 
 
-def _mission_bus(broker_url: str, client: str, vehicle: int | None = None) -> Bus:
+def _mission_bus(
+    broker_url: str,
+    client: str,
+    vehicle: int | None = None,
+    bus_options: Mapping[str, Any] | None = None,
+) -> Bus:
     """A process's bus client, its presence kept on ``topics.link(...)`` as a retained state.
 
     Its birth (``online``, on every connection) and last will (``vanished``) are retained, as is
@@ -177,6 +182,9 @@ def _mission_bus(broker_url: str, client: str, vehicle: int | None = None) -> Bu
     (a ground station started after its agents, or one that reconnects after them when the
     broker restarts) learns who is there. A broker going down publishes its clients' wills;
     their births after the restart say ``online`` again.
+
+    The client is its identity: it publishes only as ``client``, on its own topics
+    (``topics.refusal``); ``bus_options`` (``login``, ``tls_context``) log it in as it.
     """
     topic = topics.link(client if vehicle is None else vehicle)
 
@@ -189,6 +197,8 @@ def _mission_bus(broker_url: str, client: str, vehicle: int | None = None) -> Bu
         will=Will(topic, state(False, "vanished"), qos=1, retain=True),
         birth=Birth(topic, state(True), qos=1, retain=True),
         backoff=BUS_BACKOFF,
+        identity=client,
+        **(bus_options or {}),
     )
 
 
@@ -279,6 +289,7 @@ async def run_ground(
     notify: Notify = _quiet,
     shutdown_grace_s: float = SHUTDOWN_GRACE_S,
     clock: Clock = SYSTEM_CLOCK,
+    bus_options: Mapping[str, Any] | None = None,
 ) -> MissionResult:
     """The ground-station process: run the mission to its end, stop the agents, write the run.
 
@@ -287,7 +298,8 @@ async def run_ground(
     agents are elsewhere. The simulated truth (for the summary's errors) is the plan's target
     path when the vehicles are the built-in simulator (``--sitl``, or a config without
     ``connect`` URLs) or when the ground simulates the observations. Returns the results, also
-    when stopped by a signal (``interrupted``).
+    when stopped by a signal (``interrupted``). ``bus_options``: the broker login
+    (``app.cli._login.bus_options``).
     """
     cfg = plan.config
     builtin = sitl_base_port is not None or not cfg.link.connect
@@ -302,7 +314,9 @@ async def run_ground(
             stack.enter_context(eventlog)
             stack.enter_context(stop_on_signals(stop))
             events: EventSink = LoggingSink(eventlog)
-            bus = await stack.enter_async_context(_mission_bus(broker_url, GROUND_CLIENT))
+            bus = await stack.enter_async_context(
+                _mission_bus(broker_url, GROUND_CLIENT, None, bus_options)
+            )
             presence = TeamPresence(events)
             link_states = await stack.enter_async_context(bus.subscribe(topics.ALL_LINKS))
             if sitl_base_port is not None:
@@ -524,6 +538,7 @@ async def run_agent(
     builtin_simulator: bool = False,
     notify: Notify = _quiet,
     clock: Clock = SYSTEM_CLOCK,
+    bus_options: Mapping[str, Any] | None = None,
 ) -> AgentResult:
     """One agent process: fly ``vehicle`` (0-based) until the ground's shutdown or a signal.
 
@@ -531,11 +546,12 @@ async def run_agent(
     MAVSDK link to system id ``vehicle + 1`` on ``connect_url``, brings it to offboard control
     and runs its ``VehicleAgent``. ``builtin_simulator``: the vehicle is the built-in simulator
     (velocity setpoints) unless the config names an autopilot. Raises the project's errors
-    (``BusError``, ``LinkError``, ``ConfigError``) as themselves.
+    (``BusError``, ``LinkError``, ``ConfigError``) as themselves. ``bus_options``: the broker
+    login (``app.cli._login.bus_options``).
     """
     if not 0 <= vehicle < plan.count:
         raise ConfigError(f"vehicle index {vehicle} is out of range 0..{plan.count - 1}")
-    name = f"agent-{vehicle}"
+    name = topics.agent(vehicle)
     stop = StopFlag()
     result = AgentResult(vehicle, "")
     async with AsyncExitStack() as stack:
@@ -543,7 +559,7 @@ async def run_agent(
         eventlog = stack.enter_context(EventLog(out_dir / f"events-{name}.jsonl"))
         events: EventSink = LoggingSink(eventlog)
         stack.enter_context(stop_on_signals(stop))
-        bus = await stack.enter_async_context(_mission_bus(broker_url, name, vehicle))
+        bus = await stack.enter_async_context(_mission_bus(broker_url, name, vehicle, bus_options))
         commands = await stack.enter_async_context(bus.subscribe(topics.ALL_COMMANDS))
         epochs = await stack.enter_async_context(bus.subscribe(topics.MISSION_EPOCH))
         events.emit(

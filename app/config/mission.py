@@ -178,6 +178,30 @@ class SimSettings(StrictModel):
     wind: WindModel = WindModel()
 
 
+class BusLoginConfig(StrictModel):
+    """How each process of a multi-process mission logs in to the broker: the ``[bus]`` table's
+    keys beside ``url`` (``bus = "mqtt://..."`` alone is the URL). The login is the process's
+    identity (``ground``, ``agent-0``, ...); ``{client}`` in a path stands for it, so one file
+    serves the whole team (``password_file = "secrets/{client}.password"``, as ``standoff
+    broker`` writes them). Relative paths are from the working directory. The password comes
+    from ``password_file`` (its first line) or the environment variable ``password_env``; TLS
+    (``mqtts://``): ``ca_file`` to trust, ``cert_file`` / ``key_file`` a client certificate."""
+
+    password_file: str | None = None
+    password_env: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")] | None = None
+    ca_file: str | None = None
+    cert_file: str | None = None
+    key_file: str | None = None
+
+    @model_validator(mode="after")
+    def _one_password(self) -> "BusLoginConfig":
+        if self.password_file is not None and self.password_env is not None:
+            raise ValueError("give password_file or password_env, not both")
+        if self.key_file is not None and self.cert_file is None:
+            raise ValueError("key_file needs cert_file")
+        return self
+
+
 class MissionConfig(StrictModel):
     name: str = "mission"
     vehicles: Count = 3
@@ -197,7 +221,19 @@ class MissionConfig(StrictModel):
     link: LinkSettings = LinkSettings()
     sim: SimSettings = SimSettings()
     origin: OriginConfig = OriginConfig()
-    bus: str | None = None
+    bus: str | None = None  # the broker's URL (``[bus] url``)
+    bus_login: BusLoginConfig = BusLoginConfig()  # the other keys of a ``[bus]`` table
+
+    @model_validator(mode="before")
+    @classmethod
+    def _bus_table(cls, data: object) -> object:
+        """``[bus]`` as a table: its ``url`` is ``bus``, its other keys ``bus_login``."""
+        if isinstance(data, dict) and isinstance(data.get("bus"), dict):
+            if "bus_login" in data:
+                raise ValueError("give the broker's login in the [bus] table only")
+            table = dict(data["bus"])
+            data = {**data, "bus": table.pop("url", None), "bus_login": table}
+        return data
 
     @model_validator(mode="after")
     def _phase_band_fits(self) -> "MissionConfig":

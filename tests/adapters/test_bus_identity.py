@@ -4,6 +4,7 @@ a client with an identity publishing only as itself, and the shipped mosquitto c
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import logging
 import math
@@ -22,7 +23,8 @@ from app.adapters.bus.broker_setup import (
     writable,
     write_team,
 )
-from app.errors import BusError
+from app.config.mission import MissionConfig
+from app.errors import BusError, ConfigError
 from app.runtime.ports import topics
 from app.runtime.ports.messages import (
     Command,
@@ -484,3 +486,64 @@ def test_write_team_keeps_secrets_private(tmp_path: Path) -> None:
     assert "ground-secret-xyz" not in files.passwd.read_text(encoding="utf-8")
     assert "user agent-1\n" in files.acl.read_text(encoding="utf-8")
     assert "user agent-2" not in files.acl.read_text(encoding="utf-8")
+
+
+# --- the command line: standoff broker, and each process's login ----------------------------
+
+
+def test_standoff_broker_writes_a_team_that_mosquitto_runs(tmp_path: Path) -> None:
+    from app.cli import main
+
+    assert main(["broker", "--vehicles", "2", "--out", str(tmp_path / "b"), "--port", "1"]) == 0
+    assert (tmp_path / "b" / "acl").read_text(encoding="utf-8") == acl_text(2)
+    for who in ("ground", "agent-0", "agent-1", "observer"):
+        assert (tmp_path / "b" / "secrets" / f"{who}.password").read_text(encoding="utf-8")
+    assert main(["broker", "--vehicles", "0", "--out", str(tmp_path / "c")]) == 2
+
+
+def login_args(**options: str | None) -> argparse.Namespace:
+    fields = ("broker", "password_file", "password_env", "ca_file", "cert_file", "key_file")
+    return argparse.Namespace(**{f: options.get(f) for f in fields})
+
+
+def mission_config(bus: object) -> MissionConfig:
+    from app.config import load_config, validate_config
+
+    raw = load_config("mqtt", MissionConfig).model_dump()
+    raw["bus"] = bus
+    raw.pop("bus_login")
+    return validate_config(raw, MissionConfig, "test")
+
+
+def test_each_process_logs_in_as_its_identity_from_the_config_or_the_options(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from app.cli._login import bus_options
+
+    files = write_team(tmp_path, 2)
+    table = {
+        "url": "mqtt://127.0.0.1:1883",
+        "password_file": f"{tmp_path}/secrets/{{client}}.password",
+    }
+    config = mission_config(table)
+    for who in ("ground", "agent-1"):
+        login = bus_options(login_args(), config, who)["login"]
+        assert login == Login(who, files.password(who))
+    monkeypatch.setenv("AGENT_PW", "from-env")
+    options = bus_options(login_args(password_env="AGENT_PW"), config, "agent-0")
+    assert options["login"] == Login("agent-0", "from-env")  # the option wins over the file
+    plain = mission_config("mqtt://127.0.0.1:1883")
+    assert bus_options(login_args(), plain, "ground") == {}  # an anonymous broker
+    assert bus_options(login_args(broker="mqtt://ground:pw@h:1"), plain, "ground") == {
+        "login": Login("ground", "pw")
+    }
+    for args, config_, reason in [
+        (login_args(broker="mqtt://ground:pw@h:1"), plain, "logs in as 'ground'"),
+        (login_args(password_file=str(tmp_path / "nope")), plain, "cannot read"),
+        (login_args(ca_file=str(tmp_path / "ca.crt")), plain, "use mqtts://"),
+        (login_args(key_file="k"), plain, "without its certificate"),
+    ]:
+        with pytest.raises(ConfigError, match=reason):
+            bus_options(args, config_, "agent-1")
+    with pytest.raises(ConfigError, match="not both"):
+        mission_config({"url": "mqtt://h:1", "password_file": "f", "password_env": "E"})

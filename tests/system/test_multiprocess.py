@@ -268,12 +268,21 @@ async def wait_for_event(path: Path, timeout_s: float, **fields: object) -> dict
 
 @contextlib.contextmanager
 def running_broker(workdir: Path) -> Iterator[Mosquitto]:
-    broker = Mosquitto(workdir)
+    """mosquitto on the shipped configuration (configs/mosquitto/: logins only, each client
+    publishing on its own topics alone); ``login_options`` log a process in."""
+    broker = Mosquitto(workdir, team=3)
     broker.start()
     try:
         yield broker
     finally:
         broker.stop()
+
+
+def login_options(broker: Mosquitto) -> list[str]:
+    """Each process logs in as its identity, its password from the file ``standoff broker``
+    wrote for it."""
+    assert broker.team is not None
+    return ["--password-file", str(broker.team.directory / "secrets" / "{client}.password")]
 
 
 # --- three agents, the broker restarted mid-track ------------------------------------------------
@@ -303,7 +312,7 @@ async def team_run(tmp_path_factory: pytest.TempPathFactory) -> TeamRun:
     out = tmp_path / "run"
     with running_broker(tmp_path) as mosquitto:
         common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
-        common += ["--out", str(out)]
+        common += ["--out", str(out), *login_options(mosquitto)]
         async with contextlib.AsyncExitStack() as stack:
             ground, agents = await start_team(stack, common, tmp_path)
             # mid-mission: every agent has heard that the team tracks the target (an agent cut
@@ -331,6 +340,9 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         assert report["counters"]["agent"]["ticks"] > 100
         assert report["counters"]["link"]["setpoints"] > 100
         assert report["counters"]["bus"]["malformed"] == 0
+        # through the logins and the ACL: nothing of the team's own was refused or denied
+        assert report["counters"]["bus"]["refused"] == 0
+        assert report["counters"]["bus"]["denied"] == 0
         assert (out / f"vehicle-{i + 1}.tlog").stat().st_size > 10_000
         agent_events = [json.loads(line) for line in (out / f"events-agent-{i}.jsonl").open()]
         kinds = [e["kind"] for e in agent_events]
@@ -441,7 +453,7 @@ async def signalled_run(tmp_path_factory: pytest.TempPathFactory) -> SignalledRu
     out = tmp_path / "run"
     with running_broker(tmp_path) as mosquitto:
         common = [str(mission), "--broker", mosquitto.url, "--base-port", str(base_port)]
-        common += ["--out", str(out)]
+        common += ["--out", str(out), *login_options(mosquitto)]
         async with contextlib.AsyncExitStack() as stack:
             ground = await stack.enter_async_context(
                 standoff("ground", *common, "--sitl", "--quiet", stderr_path=tmp_path / "g.err")
