@@ -45,6 +45,7 @@ from app.compose.parts import (
     gcs_endpoint,
     ground_station,
     open_links,
+    recording_inputs,
     vehicle_agent,
     write_outputs,
 )
@@ -314,6 +315,7 @@ async def run_ground(
             stack.enter_context(eventlog)
             stack.enter_context(stop_on_signals(stop))
             events: EventSink = LoggingSink(eventlog)
+            recorder = stack.enter_context(recording_inputs(plan, out_dir, builtin, "ground"))
             bus = await stack.enter_async_context(
                 _mission_bus(broker_url, GROUND_CLIENT, None, bus_options)
             )
@@ -351,6 +353,7 @@ async def run_ground(
                 replay=replay,
                 on_snapshot=on_snapshot,
                 name=GROUND_CLIENT,
+                recorder=recorder,
                 # its own mission clock: statuses are judged by it, never move it (#14)
                 clock=MissionClock(epoch.epoch_s, epoch.rate, clock.time_s).now_s,
             )
@@ -712,5 +715,6 @@ class _Flight:
             )
             await prepare_vehicle(link, bring_up(plan, i), self._events)
             self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
-            self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin)
+            recorder = stack.enter_context(recording_inputs(plan, out_dir, builtin, f"agent-{i}"))
+            self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin, recorder)
             await self._agent.run()

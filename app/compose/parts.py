@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from app.adapters.eventlog import EventLog
-from app.adapters.observations_log import OBSERVATIONS_FILE, ObservationLog
+from app.adapters.observations_log import ObservationLog, observations_file
 from app.adapters.tlog import TlogRecorder
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
@@ -223,13 +223,17 @@ def scored_against_truth(plan: MissionPlan, builtin: bool) -> bool:
     return builtin or plan.config.observations.source == "simulated"
 
 
-def recording_inputs(plan: MissionPlan, out_dir: Path, builtin: bool) -> ObservationLog:
-    """The run folder's ``config.json`` (the resolved mission file) and its
-    ``observations.jsonl`` recorder (to enter), what ``standoff replay`` re-runs."""
-    write_run_config(out_dir, plan.config)
-    return ObservationLog(
-        out_dir / OBSERVATIONS_FILE, plan.count, truth=scored_against_truth(plan, builtin)
-    )
+def recording_inputs(
+    plan: MissionPlan, out_dir: Path, builtin: bool, role: str = "mission"
+) -> ObservationLog:
+    """The run folder's ``config.json`` (the resolved mission file; by the whole mission or the
+    ground) and the recorder (to enter) of what ``standoff replay`` re-runs: ``role`` is
+    ``mission`` (``observations.jsonl``), ``ground`` or ``agent-<i>`` (each its own file)."""
+    agent = role.startswith("agent")
+    if not agent:
+        write_run_config(out_dir, plan.config)
+    truth = scored_against_truth(plan, builtin) and not agent
+    return ObservationLog(out_dir / observations_file(role), plan.count, truth=truth, role=role)
 
 
 def vehicle_agent(
