@@ -11,7 +11,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.tlog import TlogRecorder
-from app.adapters.vehicle.mavsdk.packets import TARGET_OFFSETS, split_packets
+from app.adapters.vehicle.mavsdk.packets import TARGET_OFFSETS, split_packets, split_stream
 from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
 from app.adapters.vehicle.mavsdk.urls import (
     UdpEndpoint,
@@ -146,6 +146,9 @@ def test_gcs_endpoints_parse_as_px4_sitl_and_mavproxy_write_them():
             parse_gcs_endpoint(bad)
     assert udp_endpoint_of_url("udpin://0.0.0.0:14540") == UdpEndpoint("udpin", "0.0.0.0", 14540)
     assert udp_endpoint_of_url("serial:///dev/ttyUSB0:57600") is None
+    assert udp_endpoint_of_url("tcpin://0.0.0.0:5760") is None
+    assert udp_endpoint_of_url("tcp://127.0.0.1:5760") == UdpEndpoint("tcpout", "127.0.0.1", 5760)
+    assert udp_endpoint_of_url("tcpout://127.0.0.1:5770").mode == "tcpout"
 
 
 # --- the relay ------------------------------------------------------------------------------
@@ -303,3 +306,77 @@ async def test_garbage_from_the_vehicle_is_passed_on_but_not_recorded(tmp_path):
     app.close()
     # only the app's heartbeat would have been recorded, and no vehicle was heard yet
     assert (tmp_path / f"vehicle-{VEHICLE_ID}.tlog").read_bytes() == b""
+
+
+# --- a TCP vehicle (ArduPilot SITL's 5760) --------------------------------------------------
+
+
+def test_split_stream_keeps_a_packet_cut_short_for_the_next_read():
+    one = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
+    two = pack(mavlink.MAVLink_attitude_message(5, 0.3, 0, 0, 0, 0, 0), VEHICLE_ID)
+    data = one + two[:9]
+    packets, skipped, end = split_stream(data)
+    assert [p.msg_id for p in packets] == [mavlink.MAVLINK_MSG_ID_HEARTBEAT]
+    assert (skipped, end) == (0, len(one))
+    packets, _, end = split_stream(data[end:] + two[9:])
+    assert [p.msg_id for p in packets] == [mavlink.MAVLINK_MSG_ID_ATTITUDE]
+    assert end == len(two)
+
+
+async def test_a_tcp_vehicle_is_relayed_packet_by_packet_and_reconnected(tmp_path):
+    """The vehicle is a TCP server (ArduPilot SITL): its byte stream, cut anywhere, reaches the
+    app as whole packets; the app's packets reach it; a dropped connection is made again."""
+    connections: asyncio.Queue[tuple[asyncio.StreamReader, asyncio.StreamWriter]]
+    connections = asyncio.Queue()
+
+    async def accept(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await connections.put((reader, writer))
+
+    server = await asyncio.start_server(accept, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    app = await Peer.open()
+    with TlogRecorder.for_vehicles(tmp_path, [VEHICLE_ID]) as rec:
+        async with (
+            server,
+            MavlinkRelay(
+                UdpEndpoint("tcpout", "127.0.0.1", port),
+                recorder=rec,
+                system_ids=frozenset({VEHICLE_ID}),
+            ) as relay,
+        ):
+            reader, writer = await asyncio.wait_for(connections.get(), 2.0)
+            app_hb = pack(heartbeat(), APP_ID, 190)
+            app.send(app_hb, app_port(relay))
+            assert await asyncio.wait_for(reader.readexactly(len(app_hb)), 2.0) == app_hb
+            one = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
+            two = pack(mavlink.MAVLink_attitude_message(5, 0.3, 0, 0, 0, 0, 0), VEHICLE_ID)
+            writer.write(one + two[:7])  # the second packet cut in two
+            await writer.drain()
+            assert await app.next() == one
+            writer.write(two[7:])
+            await writer.drain()
+            assert await app.next() == two
+            writer.close()  # the vehicle drops the connection: the relay makes it again
+            reader, writer = await asyncio.wait_for(connections.get(), 5.0)
+            writer.write(two)
+            await writer.drain()
+            assert await app.next() == two
+            writer.close()
+    app.close()
+    kinds = [m.get_type() for m in read_messages(tmp_path / f"vehicle-{VEHICLE_ID}.tlog")]
+    assert kinds == ["HEARTBEAT", "HEARTBEAT", "ATTITUDE", "ATTITUDE"]
+
+
+async def test_a_tcp_vehicle_that_is_not_there_is_named():
+    port = free_port()  # nothing listens on TCP there (a free UDP port, most likely free in TCP)
+    with pytest.raises(LinkError, match=f"TCP 127.0.0.1:{port}"):
+        async with MavlinkRelay(UdpEndpoint("tcpout", "127.0.0.1", port)):
+            pass
+
+
+def read_messages(path) -> list[mavlink.MAVLink_message]:
+    reader = mavutil.mavlink_connection(str(path))
+    out = []
+    while (msg := reader.recv_match()) is not None:
+        out.append(msg)
+    return out

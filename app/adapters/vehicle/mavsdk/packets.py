@@ -62,8 +62,20 @@ class Packet:
 
 
 def split_packets(data: bytes) -> tuple[list[Packet], int]:
-    """The whole packets in ``data``, and how many bytes were skipped (garbage, or a packet cut
-    short at the end)."""
+    """The whole packets in ``data`` (one datagram), and how many bytes were skipped (garbage,
+    or a packet cut short at the end)."""
+    packets, skipped, _ = _split(data, stream=False)
+    return packets, skipped
+
+
+def split_stream(data: bytes) -> tuple[list[Packet], int, int]:
+    """The whole packets at the start of a byte stream's buffer (TCP, serial), the garbage
+    bytes skipped, and where the parsed part ends: a packet cut short at the end is the start
+    of the next read, kept."""
+    return _split(data, stream=True)
+
+
+def _split(data: bytes, stream: bool) -> tuple[list[Packet], int, int]:
     packets: list[Packet] = []
     skipped = 0
     i, n = 0, len(data)
@@ -107,13 +119,28 @@ def split_packets(data: bytes) -> tuple[list[Packet], int]:
                 )
                 i = end
                 continue
+        if stream and magic in (MAGIC_V1, MAGIC_V2) and _may_be_cut_short(data, i):
+            return packets, skipped, i  # the rest of this packet has not come yet
         # not a packet here (or one cut short): on to the next start byte
         j = i + 1
         while j < n and data[j] not in (MAGIC_V1, MAGIC_V2):
             j += 1
         skipped += j - i
         i = j
-    return packets, skipped
+    return packets, skipped, n
+
+
+def _may_be_cut_short(data: bytes, i: int) -> bool:
+    """Whether the packet starting at ``i`` runs past the end of ``data`` (as far as its header,
+    or what there is of it, says)."""
+    n = len(data)
+    header = HEADER_V2 if data[i] == MAGIC_V2 else HEADER_V1
+    if i + header > n:
+        return True
+    end = i + header + data[i + 1] + CRC_LEN
+    if data[i] == MAGIC_V2 and data[i + 2] & INCOMPAT_SIGNED:
+        end += SIGNATURE_LEN
+    return end > n
 
 
 def _target(data: bytes, payload: int, length: int, msg_id: int) -> int:

@@ -4,7 +4,7 @@ companion computer's programs.
 
 ::
 
-    vehicle (udpin/udpout URL) <--> relay <--> app's MAVSDK (udpout://127.0.0.1:<relay port>)
+    vehicle (udpin/udpout/tcpout URL) <--> relay <--> app's MAVSDK (udpout://127.0.0.1:<port>)
                                       ^--> ground station (udpout:127.0.0.1:14550, or udpin)
                                       '--> vehicle-<sysid>.tlog
 
@@ -29,6 +29,7 @@ port that cannot be bound stops the start, with the port named.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import ipaddress
 import logging
@@ -39,7 +40,7 @@ from types import TracebackType
 from typing import Final, Self
 
 from app.adapters.tlog import TlogRecorder
-from app.adapters.vehicle.mavsdk.packets import Packet, split_packets
+from app.adapters.vehicle.mavsdk.packets import Packet, split_packets, split_stream
 from app.adapters.vehicle.mavsdk.urls import UdpEndpoint
 from app.errors import LinkError
 
@@ -51,6 +52,11 @@ Address = tuple[str, int]
 MAX_PEERS: Final = 8
 #: how many of a kind of relay fault go to the log (the rest are only counted)
 MAX_LOGGED_FAULTS: Final = 5
+#: a TCP vehicle (ArduPilot SITL): how long to wait for the connection, how often to try again
+#: after it drops, and how much is read at once (one datagram to MAVSDK)
+TCP_CONNECT_TIMEOUT_S: Final = 10.0
+TCP_RETRY_S: Final = 1.0
+TCP_READ_BYTES: Final = 16384
 
 
 @dataclass(slots=True)
@@ -98,9 +104,11 @@ class MavlinkRelay:
 
     ``vehicle``: the vehicle's connection as MAVSDK would have opened it (``udpin``: listen for
     the vehicle, as the built-in simulator and PX4 SITL expect on 14540+i; ``udpout``: send to
-    it). ``gcs``: the ground-station endpoint (``udpin`` ports are shifted by ``gcs_index``, one
-    per vehicle). ``system_ids``: the vehicles expected on this connection (more are learned
-    from what it carries). ``wall_clock``: the tlog's timestamps (s since the Unix epoch).
+    it; ``tcpout``: connect to its TCP server, as to ArduPilot SITL's 5760, the byte stream cut
+    into packets and passed on as datagrams). ``gcs``: the ground-station endpoint (``udpin``
+    ports are shifted by ``gcs_index``, one per vehicle). ``system_ids``: the vehicles expected
+    on this connection (more are learned from what it carries). ``wall_clock``: the tlog's
+    timestamps (s since the Unix epoch).
     """
 
     def __init__(
@@ -131,6 +139,9 @@ class MavlinkRelay:
         self._app_ids: set[int] = set()
         self._gcs_ids: set[int] = set()
         self._logged: dict[str, int] = {}
+        self._tcp_writer: asyncio.StreamWriter | None = None
+        self._stack: contextlib.AsyncExitStack | None = None
+        self._tcp_task: asyncio.Task[None] | None = None
         if vehicle.mode == "udpout":
             self._vehicle_peers[(vehicle.host, vehicle.port)] = None
         if self.gcs is not None and self.gcs.mode == "udpout":
@@ -140,6 +151,25 @@ class MavlinkRelay:
 
     async def __aenter__(self) -> Self:
         loop = asyncio.get_running_loop()
+        v = self.vehicle
+        if v.mode == "tcpout":
+            await self._open_tcp()
+        else:
+            await self._open_udp(loop)
+        try:
+            self._app_t, _ = await loop.create_datagram_endpoint(
+                functools.partial(_Side, self._from_app, self._socket_error),
+                local_addr=("127.0.0.1", 0),
+            )
+            self._app_port = self._app_t.get_extra_info("sockname")[1]
+        except OSError as exc:
+            await self._aclose()
+            raise LinkError(f"cannot open the relay's local port for MAVSDK: {exc}") from exc
+        await self._open_gcs(loop)
+        log.info("%s: %s <-> %s%s", self.name, v.url, self.app_url, self._gcs_text())
+        return self
+
+    async def _open_udp(self, loop: asyncio.AbstractEventLoop) -> None:
         v = self.vehicle
         local = (v.host, v.port) if v.mode == "udpin" else (_any_host(v.host), 0)
         try:
@@ -157,18 +187,66 @@ class MavlinkRelay:
                     else ""
                 )
             ) from exc
+
+    async def _open_tcp(self) -> None:
+        """Connect to the vehicle's TCP server (ArduPilot SITL's 5760) and read it in a task
+        of the relay's own; a connection that drops is tried again every
+        ``TCP_RETRY_S`` until the relay closes."""
+        v = self.vehicle
         try:
-            self._app_t, _ = await loop.create_datagram_endpoint(
-                functools.partial(_Side, self._from_app, self._socket_error),
-                local_addr=("127.0.0.1", 0),
-            )
-            self._app_port = self._app_t.get_extra_info("sockname")[1]
-        except OSError as exc:
-            self._close()
-            raise LinkError(f"cannot open the relay's local port for MAVSDK: {exc}") from exc
-        await self._open_gcs(loop)
-        log.info("%s: %s <-> %s%s", self.name, v.url, self.app_url, self._gcs_text())
-        return self
+            async with asyncio.timeout(TCP_CONNECT_TIMEOUT_S):
+                reader, self._tcp_writer = await asyncio.open_connection(v.host, v.port)
+        except (OSError, TimeoutError) as exc:
+            raise LinkError(
+                f"cannot connect to the vehicle on TCP {v.host}:{v.port} ({v.url}): "
+                f"{getattr(exc, 'strerror', None) or exc or 'no answer'}"
+            ) from exc
+        stack = contextlib.AsyncExitStack()
+        group = await stack.enter_async_context(asyncio.TaskGroup())
+        self._tcp_task = group.create_task(self._read_tcp(reader), name=f"{self.name} tcp")
+        self._stack = stack
+
+    async def _read_tcp(self, reader: asyncio.StreamReader) -> None:
+        buffer = b""
+        while True:
+            try:
+                data = await reader.read(TCP_READ_BYTES)
+            except OSError as exc:
+                data = b""
+                log.debug("%s: TCP read: %s", self.name, exc)
+            if not data:
+                log.warning("%s: the vehicle's TCP connection closed; reconnecting", self.name)
+                reader = await self._reconnect_tcp()
+                buffer = b""
+                continue
+            buffer += data
+            try:
+                packets, skipped, end = split_stream(buffer)
+                self.counters.bytes_skipped += skipped
+                if end:
+                    self._vehicle_packets(self._wall_clock(), buffer[:end], packets)
+                buffer = buffer[end:]
+                if len(buffer) > TCP_READ_BYTES:  # never a packet: let it go
+                    self.counters.bytes_skipped += len(buffer)
+                    buffer = b""
+            except Exception as exc:  # a bug here must not cut the vehicle off
+                self._fault("vehicle stream", exc)
+                buffer = b""
+
+    async def _reconnect_tcp(self) -> asyncio.StreamReader:
+        v = self.vehicle
+        writer, self._tcp_writer = self._tcp_writer, None
+        if writer is not None:
+            writer.close()
+        while True:
+            await asyncio.sleep(TCP_RETRY_S)
+            try:
+                reader, self._tcp_writer = await asyncio.open_connection(v.host, v.port)
+            except OSError as exc:
+                log.debug("%s: TCP reconnect: %s", self.name, exc)
+                continue
+            log.info("%s: the vehicle's TCP connection is back", self.name)
+            return reader
 
     async def _open_gcs(self, loop: asyncio.AbstractEventLoop) -> None:
         """The ground station's socket; one that cannot be opened is an error in the log and
@@ -199,7 +277,7 @@ class MavlinkRelay:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self._close()
+        await self._aclose()
         c = self.counters
         log.info(
             "%s closed: %d datagrams from the vehicle, %d from the app, %d from the ground "
@@ -213,11 +291,21 @@ class MavlinkRelay:
             c.send_errors,
         )
 
-    def _close(self) -> None:
+    async def _aclose(self) -> None:
         for transport in (self._vehicle_t, self._app_t, self._gcs_t):
             if transport is not None:
                 transport.close()
         self._vehicle_t = self._app_t = self._gcs_t = None
+        stack, self._stack = self._stack, None
+        if stack is not None:
+            if self._tcp_task is not None:
+                self._tcp_task.cancel()
+            await stack.aclose()
+        writer, self._tcp_writer = self._tcp_writer, None
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(OSError):
+                await writer.wait_closed()
 
     # ---- what the app and the operator see ---------------------------------------------------
 
@@ -247,12 +335,21 @@ class MavlinkRelay:
 
     def _from_vehicle(self, data: bytes, addr: Address) -> None:
         now = self._wall_clock()
-        self.counters.from_vehicle += 1
         if self.vehicle.mode == "udpin":
             self._remember(self._vehicle_peers, addr)
         try:
             packets, skipped = split_packets(data)
             self.counters.bytes_skipped += skipped
+        except Exception as exc:
+            self._fault("vehicle datagram", exc)
+            return
+        self._vehicle_packets(now, data, packets)
+
+    def _vehicle_packets(self, now: float, data: bytes, packets: list[Packet]) -> None:
+        """What the vehicle sent (``data``, holding ``packets``): on to the app and the ground
+        station, then into the log."""
+        self.counters.from_vehicle += 1
+        try:
             for p in packets:
                 self._vehicle_ids.add(p.system_id)
             # on to the app and the ground station first, then the log
@@ -310,6 +407,13 @@ class MavlinkRelay:
     # ---- helpers -----------------------------------------------------------------------------
 
     def _send_to_vehicle(self, data: bytes) -> None:
+        if self.vehicle.mode == "tcpout":
+            writer = self._tcp_writer
+            if writer is None or writer.is_closing():
+                self.counters.send_errors += 1  # reconnecting: dropped, as a radio would
+                return
+            writer.write(data)
+            return
         transport = self._vehicle_t
         if transport is None:
             return

@@ -42,16 +42,18 @@ def validate_url(url: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class UdpEndpoint:
-    """A UDP MAVLink endpoint: ``udpin`` listens on ``host:port`` and answers whoever sends to
-    it; ``udpout`` sends to ``host:port`` (from a port of its own) and hears the answers."""
+    """A MAVLink endpoint the relay opens: ``udpin`` listens on ``host:port`` and answers
+    whoever sends to it; ``udpout`` sends to ``host:port`` (from a port of its own) and hears
+    the answers; ``tcpout`` connects to a TCP server there (ArduPilot SITL's 5760), for the
+    vehicle side only."""
 
-    mode: Literal["udpin", "udpout"]
+    mode: Literal["udpin", "udpout", "tcpout"]
     host: str
     port: int
 
     def __post_init__(self) -> None:
-        if self.mode not in ("udpin", "udpout"):
-            raise ConfigError(f"UDP endpoint mode must be udpin or udpout, got {self.mode!r}")
+        if self.mode not in ("udpin", "udpout", "tcpout"):
+            raise ConfigError(f"endpoint mode must be udpin, udpout or tcpout, got {self.mode!r}")
         if not self.host:
             raise ConfigError("UDP endpoint needs a host")
         if not 1 <= self.port <= 65535:
@@ -73,13 +75,20 @@ class UdpEndpoint:
 
 
 def udp_endpoint_of_url(url: str) -> UdpEndpoint | None:
-    """The UDP endpoint of a MAVSDK URL (``validate_url``); None for TCP and serial URLs."""
+    """The endpoint a relay opens for a MAVSDK URL (``validate_url``): UDP both ways, and TCP
+    when it connects out (``tcpout://``, ``tcp://``); None for ``tcpin://`` and serial."""
     parts = urlsplit(validate_url(url))
-    if parts.scheme not in ("udpin", "udpout"):
+    modes: dict[str, Literal["udpin", "udpout", "tcpout"]] = {
+        "udpin": "udpin",
+        "udpout": "udpout",
+        "tcpout": "tcpout",
+        "tcp": "tcpout",
+    }
+    mode = modes.get(parts.scheme)
+    if mode is None:
         return None
     assert parts.hostname is not None
     assert parts.port is not None
-    mode: Literal["udpin", "udpout"] = "udpin" if parts.scheme == "udpin" else "udpout"
     return UdpEndpoint(mode, parts.hostname, parts.port)
 
 
