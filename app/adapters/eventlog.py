@@ -1,7 +1,9 @@
 """The run's event log: one JSON object per line, flushed as it goes so a crash loses nothing.
 
 Every event carries the vehicle time ``t_s`` it refers to, a ``kind`` and its own fields; the
-log also counts events per kind, which the run summary reports.
+log also counts events per kind, which the run summary reports. Vehicles are written as users
+number them, from 1 (``app.runtime.events.for_users``: ``vehicle``, and the lists ``vehicles``,
+``active``, ``agents``).
 
 Kinds that can come at the sensor or setpoint rate for as long as their cause lasts (a camera
 that keeps reporting nonsense, a vehicle that refuses every speed command) are written once per
@@ -18,6 +20,8 @@ from collections import Counter
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Final, Self
+
+from app.runtime.events import for_users
 
 #: event time (s) within which a repeated event of one key is written once
 REPEAT_WINDOW_S: Final = 5.0
@@ -71,7 +75,8 @@ class EventLog:
         self.counts[kind] += 1
         if self._file is None:
             return
-        record = {"t_s": _plain(t_s), "kind": kind, **{k: _plain(v) for k, v in fields.items()}}
+        numbered = for_users(fields)
+        record = {"t_s": _plain(t_s), "kind": kind, **{k: _plain(v) for k, v in numbered.items()}}
         key_fields = REPEATED_KINDS.get(kind)
         if key_fields is not None:
             key = (kind, *(str(fields.get(name)) for name in key_fields))

@@ -33,7 +33,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
             "paper's section 5.2 scenario on 3 simulated vehicles. Writes a run folder. "
             "While it flies, a vehicle whose mode someone else changed (RC, a ground-control "
             "station, RTL, a failsafe) is left alone until you type 'resume N' (N: the vehicle "
-            "index the events print; 'resume' alone: every vehicle) and Enter; 'hold N' holds one."
+            "number, from 1, as the live view and the events print it; 'resume' alone: every "
+            "vehicle) and Enter; 'hold N' holds one."
         ),
     )
     add_mission_options(

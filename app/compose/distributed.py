@@ -52,6 +52,7 @@ from app.compose.parts import (
 from app.compose.simulator import simulator_process
 from app.config.plan import MissionPlan
 from app.errors import BusError, ConfigError, LinkError, StandoffError
+from app.report.provenance import run_block
 from app.runtime.agent import VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundStation, Measurement
@@ -309,6 +310,9 @@ async def run_ground(
     interrupted = False
     stop = StopFlag()
     wall_start = clock.monotonic_s()
+    run = run_block(
+        cfg, started_epoch_s=clock.time_s(), speedup=clock_rate(plan, builtin), process="ground"
+    )
     try:
         async with AsyncExitStack() as stack:
             stack.enter_context(_forced(stop))
@@ -384,8 +388,34 @@ async def run_ground(
     finally:
         # the agents hold their vehicles and the simulator is stopped; write the run folder
         wall_s = clock.monotonic_s() - wall_start
-        result = write_outputs(plan, out_dir, ground, eventlog, {}, wall_s, interrupted)
+        remote = agent_files(out_dir, plan.count)
+        result = write_outputs(
+            plan, out_dir, ground, eventlog, {}, wall_s, interrupted, run=run, remote=remote
+        )
     return result
+
+
+def agent_files(out_dir: Path, count: int) -> dict[int, dict[str, Any]]:
+    """The counters (``link``, ``agent``, ``bus``) each agent wrote to ``agent-I.json`` in
+    ``out_dir`` as it stopped (before it went offline), by vehicle index: the agents that share
+    the ground's run folder. A file missing (an agent elsewhere, or still running) or unreadable
+    is left out, the latter with a warning."""
+    found: dict[int, dict[str, Any]] = {}
+    for i in range(count):
+        path = out_dir / f"{topics.agent(i)}.json"
+        try:
+            document = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            continue
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            log.warning("%s: cannot read the agent's counters: %s", path, exc)
+            continue
+        counters = document.get("counters") if isinstance(document, dict) else None
+        if isinstance(counters, dict):
+            found[i] = counters
+        else:
+            log.warning("%s: no counters in it", path)
+    return found
 
 
 async def _end_epoch(bus: Bus, epoch: MissionEpoch) -> None:

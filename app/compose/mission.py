@@ -8,7 +8,7 @@ an error, Ctrl-C) puts every vehicle in hold and closes every log.
 Mission time: 0 is when the vehicles are there to fly (the built-in simulator's start, or the
 launch with external vehicles), on the host's monotonic clock times the clock rate (the
 simulator's speed-up); every link maps its vehicle's boot clock onto it. ``operator``: lines an
-operator types (``resume [N ...]``, ``hold [N ...]``; N the vehicle index as the events print
+operator types (``resume [N ...]``, ``hold [N ...]``; N the vehicle number as the events print
 it, none: every vehicle), published as bus commands to the agents.
 """
 
@@ -35,6 +35,7 @@ from app.compose.parts import (
 from app.compose.simulator import simulator_process
 from app.config.plan import MissionPlan
 from app.errors import ConfigError
+from app.report.provenance import run_block
 from app.runtime.agent import VehicleAgent
 from app.runtime.events import LoggingSink
 from app.runtime.ground import GroundStation, Measurement
@@ -109,6 +110,11 @@ class Mission:
     async def run(self) -> MissionResult:
         """Fly the plan to its end; write and return the run's results (also when interrupted)."""
         wall_start = self._clock.monotonic_s()
+        run = run_block(
+            self.plan.config,
+            started_epoch_s=self._clock.time_s(),
+            speedup=clock_rate(self.plan, self.builtin),
+        )
         eventlog = EventLog(self.out_dir / "events.jsonl")
         try:
             async with AsyncExitStack() as stack:
@@ -126,6 +132,7 @@ class Mission:
                 wall_s,
                 self.interrupted,
                 self.agents,
+                run=run,
             )
         return result
 
@@ -253,8 +260,9 @@ class Mission:
 
 
 def parse_operator_line(line: str, vehicles: int) -> Command | None:
-    """An operator's line as a bus command: ``resume``/``hold`` with optional vehicle indices
-    (0-based, as the events print them); None for a blank line; ``ValueError`` otherwise."""
+    """An operator's line as a bus command: ``resume``/``hold`` with optional vehicle numbers
+    (from 1, as the live view and the events print them; the command carries the internal
+    0-based indices); None for a blank line; ``ValueError`` otherwise."""
     words = line.split()
     if not words:
         return None
@@ -262,16 +270,16 @@ def parse_operator_line(line: str, vehicles: int) -> Command | None:
     if verb not in ("resume", "hold"):
         raise ValueError(f"unknown command {verb!r}: type 'resume [N ...]' or 'hold [N ...]'")
     try:
-        chosen = tuple(int(a) for a in args)
+        numbers = tuple(int(a) for a in args)
     except ValueError:
-        raise ValueError(f"vehicle indices are numbers 0..{vehicles - 1}, got {args}") from None
-    if any(not 0 <= v < vehicles for v in chosen):
-        raise ValueError(f"vehicle indices are 0..{vehicles - 1}, got {list(chosen)}")
+        raise ValueError(f"vehicle numbers are 1..{vehicles}, got {args}") from None
+    if any(not 1 <= n <= vehicles for n in numbers):
+        raise ValueError(f"vehicle numbers are 1..{vehicles}, got {list(numbers)}")
     return Command(
         sender="operator",
         t_s=0.0,
         command="resume" if verb == "resume" else "hold",
-        vehicles=chosen or None,
+        vehicles=tuple(n - 1 for n in numbers) or None,
     )
 
 

@@ -192,7 +192,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         out_commands = []
         for i, own in enumerate(owns):
             states[i], out = logic.step(states[i], logic.Control(t, own), agents[i])
-            events.extend((e.t_s, e.kind, f"vehicle {i}: {e.detail}") for e in out.events)
+            events.extend((e.t_s, e.kind, f"vehicle {i + 1}: {e.detail}") for e in out.events)
             command = out.command
             if command is None:  # a holding agent: the vehicle keeps its course and speed
                 out_commands.append((own.course_rad, own.speed_m_s))

@@ -20,6 +20,7 @@ from app.adapters.vehicle.mavsdk.urls import UdpEndpoint, parse_gcs_endpoint, ud
 from app.config.plan import MissionPlan
 from app.core.mission.team import TeamSample
 from app.report.run_folder import write_run_config, write_run_folder
+from app.report.summary import vehicle_key
 from app.runtime.agent import AgentRuntimeParams, VehicleAgent
 from app.runtime.ground import (
     GroundRuntimeParams,
@@ -150,12 +151,15 @@ async def _relayed(
     gcs: UdpEndpoint | None,
     notify: Callable[[str], None] | None,
 ) -> str:
-    """The URL MAVSDK opens for connection ``k``: its relay's, or the connection itself when it
-    is not UDP (TCP, serial: flown directly, with no flight log and no ground station)."""
+    """The URL MAVSDK opens for connection ``k``: its relay's, or the connection itself when
+    the relay cannot open it (``tcpin``, serial: flown directly, with no flight log and no
+    ground station)."""
     endpoint = udp_endpoint_of_url(url)
     if endpoint is None:
         _log.warning(
-            "%s is flown directly: the relay (flight log, ground station) takes UDP only", url
+            "%s is flown directly: the relay (flight log, ground station) takes UDP and TCP "
+            "client URLs only",
+            url,
         )
         return url
     # each connection one vehicle: vehicle i's own ground-station port, and its system id
@@ -293,9 +297,22 @@ def write_outputs(
     wall_s: float,
     interrupted: bool,
     agents: Sequence[VehicleAgent] = (),
+    *,
+    run: Mapping[str, Any] | None = None,
+    remote: Mapping[int, Mapping[str, Any]] | None = None,
 ) -> MissionResult:
     """The run folder (``write_run_folder``) from what the ground recorded and the parts
-    counted."""
+    counted. ``run``: how the run was made (``app.report.provenance.run_block``); ``remote``:
+    per vehicle, the ``link`` and ``agent`` counters of agents in other processes (their
+    ``agent-I.json``), merged in beside this process's own. Vehicles are keyed from 1."""
+    remote = remote or {}
+    link_counters = {i: c for i, link in links.items() if (c := counters_of(link)) is not None}
+    agent_counters = {a.params.vehicle: dataclasses.asdict(a.counters) for a in agents}
+    for i, blocks in remote.items():
+        if isinstance(blocks.get("link"), dict):
+            link_counters.setdefault(i, blocks["link"])
+        if isinstance(blocks.get("agent"), dict):
+            agent_counters.setdefault(i, blocks["agent"])
     samples = ground.samples if ground is not None else []
     mission_t = ground.state.mission_t_s if ground is not None else math.nan
     summary = write_run_folder(
@@ -306,6 +323,7 @@ def write_outputs(
         radius_tolerance_m=plan.ground.stages.radius_tolerance_m,
         spacing_tolerance_rad=plan.ground.stages.spacing_tolerance_rad,
         extra={
+            "run": dict(run) if run is not None else None,
             "mission": plan.config.name,
             "vehicles": plan.count,
             "end_t_s": plan.end_t_s,
@@ -313,17 +331,15 @@ def write_outputs(
             "wall_s": wall_s,
             "interrupted": interrupted,
             "events": dict(eventlog.counts),
-            "links": {
-                str(i): c for i, link in links.items() if (c := counters_of(link)) is not None
-            },
-            "agents": {str(a.params.vehicle): dataclasses.asdict(a.counters) for a in agents},
+            "links": {vehicle_key(i): c for i, c in sorted(link_counters.items())},
+            "agents": {vehicle_key(i): c for i, c in sorted(agent_counters.items())},
             "fusion": _fusion_counters(ground),
             "ground": ground.report() if ground is not None else None,
             "phase_actuators": {
-                str(a.params.vehicle): a.actuator for a in agents if a.actuator is not None
+                vehicle_key(a.params.vehicle): a.actuator for a in agents if a.actuator is not None
             },
             "vehicle_altitudes_m": {
-                str(i): plan.config.link.vehicle_altitude_m(i) for i in range(plan.count)
+                vehicle_key(i): plan.config.link.vehicle_altitude_m(i) for i in range(plan.count)
             },
         },
     )

@@ -3,6 +3,9 @@
 Pure: takes the samples the ground station recorded, returns a JSON-ready dict. Errors are
 measured against the true target (the simulator's, or the scenario's scripted path), so they
 include estimation error, as a user watching the vehicles would see it.
+
+Vehicles are keyed as a user numbers them, from 1 (``vehicle_key``: the MAVLink system id, the
+``vehicle-N.tlog``, the live view and the events), the samples' internal indices from 0.
 """
 
 import math
@@ -12,6 +15,15 @@ from typing import Any
 import numpy as np
 
 from app.core.mission.team import TeamSample
+
+#: the layout of summary.json; 2: ``schema_version``, the ``run`` block (``app.report.provenance``)
+#: and vehicles keyed from 1
+SUMMARY_SCHEMA_VERSION = 2
+
+
+def vehicle_key(vehicle: int) -> str:
+    """A vehicle's key in the summary: its number from 1 (internal index ``vehicle`` + 1)."""
+    return str(vehicle + 1)
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:
@@ -74,8 +86,8 @@ def summarize(
 ) -> dict[str, Any]:
     """Per part of the run and per vehicle: distance, spacing, speed and estimation figures.
 
-    Returns ``{"parts": {key: {"vehicles": {id: figures}, "team": figures}}, "convergence": {...}}``
-    with distances in metres, angles in degrees, speeds in m/s and times in seconds after the
+    Returns ``{"schema_version": 2, "parts": {key: {"vehicles": {number: figures}, "team":
+    figures}}, "convergence": {...}}`` (vehicles numbered from 1) with distances in metres, angles in degrees, speeds in m/s and times in seconds after the
     tracking command.
     """
     rows = sorted(samples, key=lambda s: s.t_s)
@@ -112,7 +124,7 @@ def summarize(
             if vehicle in spacing:
                 figures["spacing_error_deg"] = _stats(spacing[vehicle])
             figures["speed_m_s"] = {"min": min(speed[vehicle]), "max": max(speed[vehicle])}
-            vehicles[str(vehicle)] = figures
+            vehicles[vehicle_key(vehicle)] = figures
         all_dist = [e for errs in dist.values() for e in errs]
         all_spacing = [e for errs in spacing.values() for e in errs]
         team: dict[str, object] = {
@@ -155,4 +167,8 @@ def summarize(
         "spacing_tolerance_deg": math.degrees(spacing_tolerance_rad),
         "hold_s": hold_s,
     }
-    return {"parts": out_parts, "convergence": convergence}
+    return {
+        "schema_version": SUMMARY_SCHEMA_VERSION,
+        "parts": out_parts,
+        "convergence": convergence,
+    }

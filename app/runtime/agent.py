@@ -359,9 +359,9 @@ class VehicleAgent:
                 skipped_share=round(share, 3),
                 repeat=w.warned,
                 detail=(
-                    f"agent {self.params.vehicle} steered on {1.0 - share:.0%} of its "
-                    f"telemetry frames over {t - w.start_t:.0f} s: short of CPU, the figures "
-                    "suffer (lower --speedup, or run the agents as separate processes)"
+                    f"vehicle {self.params.vehicle + 1}'s agent steered on {1.0 - share:.0%} "
+                    f"of its telemetry frames over {t - w.start_t:.0f} s: short of CPU, the "
+                    "figures suffer (lower --speedup, or run the agents as separate processes)"
                 ),
             )
             w.warned = True

@@ -1,9 +1,11 @@
 import json
+import logging
 import math
 
 import pytest
 
 from app.adapters.eventlog import EventLog
+from app.runtime.events import LoggingSink
 
 
 def test_events_are_json_lines_with_counts(tmp_path):
@@ -17,7 +19,7 @@ def test_events_are_json_lines_with_counts(tmp_path):
     assert lines[1] == {
         "t_s": 13.0,
         "kind": "observation_dropped",
-        "vehicle": 1,
+        "vehicle": 2,  # index 1: written as users number vehicles, from 1
         "reason": "non-finite",
         "value": "nan",
     }
@@ -36,10 +38,10 @@ def test_repeated_drops_are_written_once_per_window_with_a_count(tmp_path):
         log.emit("stage", 5.1, stage="track")
     lines = [json.loads(line) for line in path.read_text().splitlines()]
     drops = [(e["t_s"], e["vehicle"], e.get("repeats")) for e in lines if e["kind"] != "stage"]
-    # the first, the first after 5 s (49 held back before it), vehicle 1's own, and on closing
-    # the last one held back (t = 9.9 s, with the 48 before it)
-    assert drops[:3] == [(0.0, 0, None), (5.0, 0, 49), (9.95, 1, None)]
-    assert drops[3][1:] == (0, 48)
+    # the first, the first after 5 s (49 held back before it), vehicle 2's own, and on closing
+    # the last one held back (t = 9.9 s, with the 48 before it); vehicles numbered from 1
+    assert drops[:3] == [(0.0, 1, None), (5.0, 1, 49), (9.95, 2, None)]
+    assert drops[3][1:] == (1, 48)
     assert drops[3][0] == pytest.approx(9.9)
     assert sum(e["kind"] == "stage" for e in lines) == 2
     # the counts count every event, written or held back
@@ -61,3 +63,24 @@ def test_held_back_repeats_are_written_before_the_next_other_event(tmp_path):
     times = [e["t_s"] for e in lines]
     assert times == sorted(times)
     assert log.counts == {"telemetry_rejected": 30, "agent_stop": 1}
+
+
+def test_vehicles_are_numbered_from_1_in_the_file_and_on_the_terminal(tmp_path, caplog):
+    path = tmp_path / "events.jsonl"
+    with EventLog(path) as log, caplog.at_level(logging.INFO, logger="standoff.events"):
+        sink = LoggingSink(log)
+        sink.emit("mission_start", 0.0, vehicles=3)  # a count, not vehicles
+        sink.emit("pilot_took_over", 1.0, vehicle=0, flight_mode="HOLD")
+        sink.emit("operator_command", 2.0, command="resume", vehicles=(2,))
+        sink.emit("operator_command", 2.5, command="resume", vehicles=None)
+        sink.emit("fused", 3.0, active=(0, 2))
+        sink.emit("shutdown_sent", 4.0, agents=[0, 1, 2])
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert lines[0]["vehicles"] == 3
+    assert lines[1]["vehicle"] == 1
+    assert lines[2]["vehicles"] == [3]
+    assert lines[3]["vehicles"] is None
+    assert lines[4]["active"] == [1, 3]
+    assert lines[5]["agents"] == [1, 2, 3]
+    assert "t=1.00 pilot_took_over vehicle=1 flight_mode=HOLD" in caplog.text
+    assert "vehicles=[3]" in caplog.text

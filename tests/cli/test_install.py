@@ -8,6 +8,7 @@ environment under ``tmp_path``; the dependencies come from the project's ``.venv
 the editable install's finder stays out and the checkout is not importable there).
 """
 
+import datetime as dt
 import json
 import os
 import shutil
@@ -141,3 +142,15 @@ def test_fly_a_copied_mission_file_from_another_folder(installed: Path, tmp_path
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["mission_t_s"] >= 25.0
     assert (out / "track.csv").is_file()
+    # how the run was made; no git commit: the installed package is not a checkout
+    assert summary["schema_version"] == 2
+    run = summary["run"]
+    assert (run["git_commit"], run["git_dirty"], run["process"]) == (None, None, "fly")
+    assert (run["speedup"], run["seed"], run["config"]["end_s"]) == (5.0, 1, 25.0)
+    assert run["standoff_version"] == "0.1.0"
+    started = dt.datetime.fromisoformat(run["started_utc"])
+    assert started.utcoffset() == dt.timedelta(0)
+    assert abs((dt.datetime.now(dt.UTC) - started).total_seconds()) < 300
+    # vehicles numbered from 1, as the tlogs
+    assert set(summary["links"]) == {"1", "2", "3"}
+    assert {f"vehicle-{n}.tlog" for n in summary["links"]} <= {p.name for p in out.iterdir()}

@@ -65,7 +65,7 @@ def test_a_silent_vehicle_leaves_and_rejoins():
     for k in range(1, 40):
         state, _, events = run(state, 0.1 * k, vehicles=(0, 2))
         left += [e for e in events if e.kind == "vehicle_left"]
-    assert [e.detail for e in left] == ["vehicle 1 left the formation"]
+    assert [e.detail for e in left] == ["vehicle 2 left the formation"]  # index 1, number 2
     assert left[0].t_s == pytest.approx(2.1)  # more than lost_after_s = 2 s behind
     assert state.active == (0, 2)
     state, _, events = run(state, 4.0)

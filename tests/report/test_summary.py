@@ -24,17 +24,19 @@ def test_figures_per_part_and_vehicle():
     ]
     out = summarize(samples, 90.0, tracking_command_t_s=0.0)
     adjust = out["parts"]["adjust"]
-    assert adjust["vehicles"]["0"]["distance_error_m"]["rms"] == pytest.approx(2.0)
-    assert adjust["vehicles"]["1"]["distance_error_m"]["max_abs"] == pytest.approx(2.0)
-    assert adjust["vehicles"]["2"]["speed_m_s"] == {"min": 16.0, "max": 16.0}
+    # vehicles keyed from 1, as users number them (the samples' index 0 is vehicle "1")
+    assert set(adjust["vehicles"]) == {"1", "2", "3"}
+    assert adjust["vehicles"]["1"]["distance_error_m"]["rms"] == pytest.approx(2.0)
+    assert adjust["vehicles"]["2"]["distance_error_m"]["max_abs"] == pytest.approx(2.0)
+    assert adjust["vehicles"]["3"]["speed_m_s"] == {"min": 16.0, "max": 16.0}
     assert adjust["team"]["spacing_error_deg"]["max_abs"] == pytest.approx(0.0, abs=1e-9)
     assert adjust["team"]["estimation_rmse"]["position_m"] == pytest.approx(1.0)
     assert adjust["team"]["estimation_rmse"]["velocity_m_s"] == pytest.approx(0.5)
     track = out["parts"]["track:B-C"]
-    # gaps 110, 130, 120: vehicle 0's gap ahead is 10 degrees short, vehicle 1's 10 long
-    assert track["vehicles"]["0"]["spacing_error_deg"]["rms"] == pytest.approx(10.0)
+    # gaps 110, 130, 120: vehicle 1's gap ahead is 10 degrees short, vehicle 2's 10 long
     assert track["vehicles"]["1"]["spacing_error_deg"]["rms"] == pytest.approx(10.0)
-    assert track["vehicles"]["2"]["spacing_error_deg"]["rms"] == pytest.approx(0.0, abs=1e-9)
+    assert track["vehicles"]["2"]["spacing_error_deg"]["rms"] == pytest.approx(10.0)
+    assert track["vehicles"]["3"]["spacing_error_deg"]["rms"] == pytest.approx(0.0, abs=1e-9)
     assert track["team"]["start_s"] == 10.0
 
 

@@ -264,7 +264,8 @@ async def test_the_phase_actuator_is_resolved_against_what_the_autopilot_honours
 
 @pytest.mark.parametrize(
     ("line", "command", "vehicles"),
-    [("resume 1\n", "resume", (1,)), ("  RESUME  ", "resume", None), ("hold 0 2", "hold", (0, 2))],
+    # vehicles numbered from 1 as the live view prints them; the command carries the indices
+    [("resume 2\n", "resume", (1,)), ("  RESUME  ", "resume", None), ("hold 1 3", "hold", (0, 2))],
 )
 def test_an_operators_line_is_a_bus_command(
     line: str, command: str, vehicles: tuple[int, ...] | None
@@ -276,7 +277,12 @@ def test_an_operators_line_is_a_bus_command(
 
 @pytest.mark.parametrize(
     ("line", "why"),
-    [("takeoff", "unknown command 'takeoff'"), ("resume 3", "0..2"), ("resume x", "numbers")],
+    [
+        ("takeoff", "unknown command 'takeoff'"),
+        ("resume 4", "1..3"),
+        ("resume 0", "1..3"),
+        ("resume x", "numbers"),
+    ],
 )
 def test_a_bad_operator_line_is_refused_with_the_reason(line: str, why: str) -> None:
     assert parse_operator_line("   \n", 3) is None
@@ -288,7 +294,7 @@ async def test_typed_lines_reach_the_agents_as_commands_and_bad_ones_are_skipped
     broker = InProcessBroker()
 
     async def typed() -> AsyncIterator[str]:
-        for line in ("resume 7\n", "resume 1\n"):
+        for line in ("resume 7\n", "resume 2\n"):
             yield line
 
     events = Events()

@@ -57,7 +57,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.asyncio(loop_scope="module")]
 CONFIG = "test-short"
 SPEEDUP = 3.0  # more than about 3x starves one process on a 2-core machine (offboard failsafe)
 WALL_TIMEOUT_S = 180.0  # the full mission is about 40 s of wall time, the fault run 80 s
-KILLED = 2
+KILLED = 2  # its index; users (the events, the operator's 'resume N') number it KILLED + 1
 # The radio is cut mid-track once the team has formed (between these mission times): how long
 # gather and adjust take varies from run to run on a loaded machine.
 FAULT_FROM_S = 64.0
@@ -405,9 +405,9 @@ async def fault_run(tmp_path_factory: pytest.TempPathFactory) -> FaultRun:
 
     def resume_when_left_alone(ctx: MissionContext) -> None:
         # back on the radio, it is in its failsafe's hold and its agent leaves it there: the
-        # operator types 'resume 2'
+        # operator types 'resume 3' (vehicles numbered from 1)
         if revived and not resumed and ctx.agents[KILLED].pilot_has_control:
-            operator.put(f"resume {KILLED}\n")
+            operator.put(f"resume {KILLED + 1}\n")
             resumed.append(ctx.ground.state.mission_t_s)
 
     def blind(ctx: MissionContext) -> None:
@@ -522,7 +522,8 @@ async def test_track_csv_has_a_stage_column_through_gather_adjust_track(full_run
 
 
 async def test_every_tlog_reads_in_pymavlink(full_run: FullRun) -> None:
-    frames = {int(i): c["frames"] for i, c in full_run.result.summary["links"].items()}
+    # the summary numbers vehicles from 1, as the tlogs' names and system ids
+    frames = {int(n) - 1: c["frames"] for n, c in full_run.result.summary["links"].items()}
     for i in range(3):
         reader = mavutil.mavlink_connection(str(full_run.result.out_dir / f"vehicle-{i + 1}.tlog"))
         positions = []
@@ -555,7 +556,7 @@ async def test_no_setpoint_was_non_finite_or_outside_the_limits(full_run: FullRu
     plan = build_plan(short_config())
     lim = plan.config.limits
     links = full_run.result.summary["links"]
-    assert set(links) == {"0", "1", "2"}
+    assert set(links) == {"1", "2", "3"}
     for counters in links.values():
         # a setpoint per frame from the hand-over on (the runway take-off and the climb to the
         # hand-over height before it are about a tenth of this short mission's frames)
@@ -598,10 +599,10 @@ async def test_a_killed_vehicle_leaves_and_the_others_respace_to_180(fault_run: 
     kill_at, revive_at = fault_run.killed_at_s, fault_run.revived_at_s
     log = events(fault_run.result.out_dir)
     left = [e for e in log if e["kind"] == "vehicle_left"]
-    assert [e["detail"] for e in left] == [f"vehicle {KILLED} left the formation"]
+    assert [e["detail"] for e in left] == [f"vehicle {KILLED + 1} left the formation"]
     lost_after_s = build_plan(short_config()).ground.lost_after_s
     assert kill_at < left[0]["t_s"] <= kill_at + lost_after_s + 1.0
-    assert any(e["kind"] == "link_lost" and e["vehicle"] == KILLED for e in log)
+    assert any(e["kind"] == "link_lost" and e["vehicle"] == KILLED + 1 for e in log)
     out = fault_run.probe.between(left[0]["t_s"] + 1.0, revive_at)
     assert out
     assert all(s.active == (0, 1) for s in out)
@@ -628,17 +629,17 @@ async def test_a_killed_vehicle_rejoins_when_its_link_returns(fault_run: FaultRu
     log = events(fault_run.result.out_dir)
     revive_at = fault_run.revived_at_s
     joined = [e for e in log if e["kind"] == "vehicle_joined" and e["t_s"] > fault_run.killed_at_s]
-    assert [e["detail"] for e in joined] == [f"vehicle {KILLED} is in the formation"]
+    assert [e["detail"] for e in joined] == [f"vehicle {KILLED + 1} is in the formation"]
     assert revive_at <= joined[0]["t_s"] <= revive_at + 5.0
-    assert any(e["kind"] == "link_restored" and e["vehicle"] == KILLED for e in log)
+    assert any(e["kind"] == "link_restored" and e["vehicle"] == KILLED + 1 for e in log)
     # it had fallen back to hold: its agent left it there, reported it, and took it back into
     # offboard only on the operator's 'resume'
-    [took] = [e for e in log if e["kind"] == "pilot_took_over" and e["vehicle"] == KILLED]
+    [took] = [e for e in log if e["kind"] == "pilot_took_over" and e["vehicle"] == KILLED + 1]
     [typed] = [e for e in log if e["kind"] == "operator_command"]
-    [resumed] = [e for e in log if e["kind"] == "resumed" and e["vehicle"] == KILLED]
+    [resumed] = [e for e in log if e["kind"] == "resumed" and e["vehicle"] == KILLED + 1]
     assert took["flight_mode"] not in ("OFFBOARD", "")
     assert typed["command"] == "resume"
-    assert list(typed["vehicles"]) == [KILLED]
+    assert list(typed["vehicles"]) == [KILLED + 1]
     assert took["t_s"] <= resumed["t_s"] <= joined[0]["t_s"]
     # to just before the end-of-mission hold (the cameras stopped meanwhile)
     back = fault_run.probe.between(joined[0]["t_s"] + 3.0, FAULT_RUN_END_S - 0.5)

@@ -306,9 +306,9 @@ def tick(
     events: list[GroundEvent] = []
     active = _active(state, params)
     for v in set(state.active) - set(active):
-        events.append(GroundEvent(t, "vehicle_left", f"vehicle {v} left the formation"))
+        events.append(GroundEvent(t, "vehicle_left", f"vehicle {v + 1} left the formation"))
     for v in set(active) - set(state.active):
-        events.append(GroundEvent(t, "vehicle_joined", f"vehicle {v} is in the formation"))
+        events.append(GroundEvent(t, "vehicle_joined", f"vehicle {v + 1} is in the formation"))
     state = replace(state, active=active)
     fused = published = None
     if t >= state.next_fuse_t_s:
