@@ -87,8 +87,8 @@ def summarize(
     """Per part of the run and per vehicle: distance, spacing, speed and estimation figures.
 
     Returns ``{"schema_version": 2, "parts": {key: {"vehicles": {number: figures}, "team":
-    figures}}, "convergence": {...}}`` (vehicles numbered from 1) with distances in metres, angles in degrees, speeds in m/s and times in seconds after the
-    tracking command.
+    figures}}, "convergence": {...}}`` (vehicles numbered from 1) with distances in metres,
+    angles in degrees, speeds in m/s and times in seconds after the tracking command.
     """
     rows = sorted(samples, key=lambda s: s.t_s)
     parts: dict[str, list[TeamSample]] = {}
