@@ -347,13 +347,19 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         agent_events = [json.loads(line) for line in (out / f"events-agent-{i}.jsonl").open()]
         kinds = [e["kind"] for e in agent_events]
         assert "offboard" in kinds
-        assert {"kind": "agent_stop", "vehicle": i, "reason": "shutdown"}.items() <= (
+        # events number vehicles from 1
+        assert {"kind": "agent_stop", "vehicle": i + 1, "reason": "shutdown"}.items() <= (
             agent_events[-1].items()
         )
 
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is False
     assert summary["mission_t_s"] >= TEAM_END_S
+    # the agents' own blocks (their agent-I.json) merged into the ground's summary, from 1
+    assert set(summary["links"]) == set(summary["agents"]) == {"1", "2", "3"}
+    assert all(summary["links"][str(i + 1)]["setpoints"] > 100 for i in range(3))
+    assert all(summary["agents"][str(i + 1)]["ticks"] > 100 for i in range(3))
+    assert summary["run"]["process"] == "ground"
     assert summary["convergence"]["time_to_circle_s"] is not None
     assert "track:A-B" in summary["parts"]
     assert (out / "track.csv").stat().st_size > 0
@@ -361,7 +367,7 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
     shutdown = next(e for e in events if e["kind"] == "shutdown_sent")
     assert shutdown["t_s"] >= TEAM_END_S
     offline = {e["vehicle"]: e["reason"] for e in events if e["kind"] == "agent_offline"}
-    assert offline == {0: "shutdown", 1: "shutdown", 2: "shutdown"}
+    assert offline == {1: "shutdown", 2: "shutdown", 3: "shutdown"}
     assert not any(e["kind"] == "agents_still_online" for e in events)
 
 
@@ -395,20 +401,25 @@ def test_a_broker_restart_mid_mission_is_survived(team_run: TeamRun) -> None:
         said = [
             (e["kind"], e["reason"])
             for e in events
-            if e["kind"] in ("agent_online", "agent_offline") and e["vehicle"] == i
+            if e["kind"] in ("agent_online", "agent_offline") and e["vehicle"] == i + 1
         ]
         assert said[0][0] == "agent_online", said
         assert said[-1] == ("agent_offline", "shutdown"), said
         for (kind, reason), (then, _) in itertools.pairwise(said):
             assert kind == "agent_online" or (reason == "vanished" and then == "agent_online")
     shutdown = next(e for e in events if e["kind"] == "shutdown_sent")
-    assert shutdown["agents"] == [0, 1, 2]
+    assert shutdown["agents"] == [1, 2, 3]
     assert not any(e["kind"] == "agents_still_online" for e in events)
 
     # after the restart the estimate follows the moving target and the team orbits it
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is False
     assert summary["mission_t_s"] >= TEAM_END_S
+    # the agents' own blocks (their agent-I.json) merged into the ground's summary, from 1
+    assert set(summary["links"]) == set(summary["agents"]) == {"1", "2", "3"}
+    assert all(summary["links"][str(i + 1)]["setpoints"] > 100 for i in range(3))
+    assert all(summary["agents"][str(i + 1)]["ticks"] > 100 for i in range(3))
+    assert summary["run"]["process"] == "ground"
     assert "track:A-B" in summary["parts"]
     # From 2 s of mission time after the reconnection (the ground's first tick still has its
     # pre-outage estimate, some 20 m behind the target that moved meanwhile): the estimate stays
@@ -501,7 +512,7 @@ def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(
     report = json.loads((out / "agent-0.json").read_text())
     assert (report["reason"], report["stopped_by"], report["held"]) == ("SIGTERM", 15, True)
     agent_events = [json.loads(line) for line in (out / "events-agent-0.jsonl").open()]
-    assert {"kind": "hold", "vehicle": 0, "reason": "SIGTERM"}.items() <= next(
+    assert {"kind": "hold", "vehicle": 1, "reason": "SIGTERM"}.items() <= next(
         e for e in agent_events if e["kind"].startswith("hold")
     ).items()
     assert {"kind": "agent_stop", "reason": "SIGTERM", "held": True}.items() <= (
@@ -510,7 +521,7 @@ def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(
     # it said it was going offline (the ground heard that, not the broker's last will)
     events = [json.loads(line) for line in (out / "events.jsonl").open()]
     offline = [(e["vehicle"], e["reason"]) for e in events if e["kind"] == "agent_offline"]
-    assert [(v, reason) for v, reason in offline if v == 0] == [(0, "SIGTERM")]
+    assert [(v, reason) for v, reason in offline if v == 1] == [(1, "SIGTERM")]
 
 
 def test_ctrl_c_on_the_ground_station_interrupts_and_tells_the_agents(
@@ -528,7 +539,7 @@ def test_ctrl_c_on_the_ground_station_interrupts_and_tells_the_agents(
     # the agent still flying heard it, and left: agent 0 had gone on its SIGTERM before
     assert run.other_code == 0, run.other.transcript()
     offline = [(e["vehicle"], e["reason"]) for e in events if e["kind"] == "agent_offline"]
-    assert offline == [(0, "SIGTERM"), (1, "shutdown")]
+    assert offline == [(1, "SIGTERM"), (2, "shutdown")]
 
 
 # --- commands that refuse to start -------------------------------------------------------------
