@@ -13,6 +13,8 @@ from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkDirectResul
 from mavsdk.plugins.offboard import OffboardError, OffboardResult
 from mavsdk.plugins.param import ParamError, ParamResult
 from mavsdk.vehicle import Vehicle
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter, arduplane_mode_name
 from app.adapters.vehicle.autopilots.base import (
@@ -244,6 +246,24 @@ def test_px4_and_arduplane_mode_names():
     assert px4_mode_name(99 << 16).startswith("UNKNOWN")
     assert arduplane_mode_name(15) == "GUIDED"
     assert arduplane_mode_name(12) == "LOITER"
+
+
+def test_the_mode_tables_know_every_mode_pymavlinks_dialects_name():
+    # ArduPlane: every PLANE_MODE of the ardupilotmega dialect, INITIALISING and AUTOLAND too
+    # (a hand-typed table once lacked them: a vehicle booting or landing read as UNKNOWN)
+    plane = {
+        name: getattr(ardupilotmega, name)
+        for name in dir(ardupilotmega)
+        if name.startswith("PLANE_MODE_") and name != "PLANE_MODE_ENUM_END"
+    }
+    assert len(plane) >= 26
+    assert all(not arduplane_mode_name(n).startswith("UNKNOWN") for n in plane.values())
+    assert arduplane_mode_name(ardupilotmega.PLANE_MODE_INITIALIZING) == "INITIALISING"
+    assert arduplane_mode_name(ardupilotmega.PLANE_MODE_AUTOLAND) == "AUTOLAND"
+    # PX4: every (main, sub) mode pymavlink maps
+    for _base, main, sub in mavutil.px4_map.values():
+        name = px4_mode_name((main << 16) | (sub << 24))
+        assert not name.startswith(("UNKNOWN", "AUTO_")), (main, sub, name)
 
 
 @pytest.mark.parametrize(
