@@ -1,4 +1,5 @@
 import argparse
+import re
 import subprocess
 import sys
 
@@ -158,11 +159,20 @@ def test_help_runs_in_a_fresh_interpreter_without_the_heavy_imports():
 def test_configs_lists_every_shipped_file_with_a_description(capsys):
     assert main(["configs"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    listed = dict(line.split(maxsplit=1) for line in lines)
+    # name, the command that takes it, its description: columns two or more spaces apart
+    rows = [re.split(r"\s{2,}", line, maxsplit=2) for line in lines]
+    listed = {name: (command, text) for name, command, text in rows}
     assert set(listed) == set(shipped_names())
-    assert listed["sim-a"] == "Simulation A: start far outside the circle, flying at the target"
-    assert listed["hil"].startswith("The paper's hardware-in-the-loop mission (section 5.2")
-    assert all(len(text) <= 100 for text in listed.values())
+    assert listed["sim-a"] == (
+        "simulate",
+        "Simulation A: start far outside the circle, flying at the target",
+    )
+    assert listed["hil"][0] == "fly"
+    assert listed["hil"][1].startswith("The paper's hardware-in-the-loop mission (section 5.2")
+    assert listed["sitl-hil"][0] == "sitl --scenario"
+    assert listed["est-hil"][0] == "estimate --generate"
+    assert listed["estimator"][0] == "estimate --config"
+    assert all(len(text) <= 100 for _, text in listed.values())
 
 
 def test_configs_prints_a_shipped_file_that_loads_back(capsys, tmp_path):
