@@ -88,7 +88,7 @@ class AgentRuntimeParams:
     load_warn_every_s: float = 30.0
     phase_actuator: ActuatorChoice | None = None
     max_fix_rate_hz: float = 20.0
-    fix_burst: int = 5
+    fix_burst: int = 20
 
 
 @dataclass

@@ -210,3 +210,17 @@ def test_messages_from_the_future_are_refused_by_the_agent() -> None:
     state2, out = agent_logic.step(state, agent_logic.HeardTeammate(1, fix), p)
     assert out.refused
     assert state2.teammates == state.teammates
+
+
+def test_without_a_clock_the_team_back_from_an_outage_moves_mission_time_one_liar_does_not() -> (
+    None
+):
+    state = ground_run(ground_logic.initial_ground_state(), 0.0, 5.0, clock=False)
+    liar = HeardStatuses(((0, report(30.0, 0)),))
+    state, out = ground_logic.step(state, liar, GROUND)
+    assert out.refused
+    assert state.mission_t_s == 5.0
+    back = HeardStatuses(((1, report(30.1, 1)),))  # a second vehicle at about that time
+    state, out = ground_logic.step(state, back, GROUND)
+    assert not out.refused
+    assert state.mission_t_s == 30.1

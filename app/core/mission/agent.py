@@ -138,7 +138,7 @@ class MissionAgentParams:
     course_id: cid.CourseIdParams | None = None
     fly_identified: bool = True
     course_id_change: float = 0.05
-    max_ahead_s: float = 1.0
+    max_ahead_s: float = 5.0
     fused_gate_nis: float = 50.0
     ground_silent_hold_s: float = 60.0
 

@@ -67,8 +67,9 @@ class GroundParams:
 
     What the station hears cannot push it (issue #14): a status or local estimate stamped more
     than ``max_ahead_s`` ahead of the station's own mission clock (``clock_t_s`` of the input;
-    without one, of the mission time so far), or more than ``max_behind_s`` behind it, is
-    refused and counted, and mission time never passes that clock. A local estimate whose
+    without one, of the mission time so far, unless another vehicle claims about the same
+    time: the team back from an outage), or more than ``max_behind_s`` behind it, is refused
+    and counted, and mission time never passes that clock. A local estimate whose
     position the fused estimate (predicted to its time) finds further off than
     ``local_gate_nis`` (position NIS over the sum of both covariances) is refused as an
     outlier while the fusion is live (some estimate taken within ``coast_after_s``), as is one
@@ -85,7 +86,7 @@ class GroundParams:
     coast_after_s: float = 1.0
     coast_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
     prediction_model: MotionModel = field(default_factory=lambda: MotionModel("cv", 0.05))
-    max_ahead_s: float = 1.0
+    max_ahead_s: float = 2.0
     max_behind_s: float = 30.0
     local_gate_nis: float = 50.0
 
@@ -127,6 +128,7 @@ class GroundState:
     statuses_refused: int = 0  # stamped outside the window of the station's clock
     locals_refused: int = 0  # stamped outside it, of the wrong shape, or outliers
     last_taken_t_s: float = -math.inf  # time of the newest local estimate taken into the fusion
+    ahead_claims: tuple[tuple[int, float], ...] = ()  # refused status times, by vehicle
 
     def report(self, vehicle: int) -> VehicleReport | None:
         return dict(self.reports).get(vehicle)
@@ -169,8 +171,18 @@ def hear_status(
     """Keep a vehicle's newest report and advance mission time (older reports are ignored);
     with ``params``, one outside the window of the station's clock is refused and counted, and
     mission time goes no further than ``clock_t_s``."""
-    if params is not None and out_of_window(state, report.t_s, params, clock_t_s):
-        return replace(state, statuses_refused=state.statuses_refused + 1)
+    if (
+        params is not None
+        and out_of_window(state, report.t_s, params, clock_t_s)
+        and (clock_t_s is not None or not _corroborated(state, vehicle, report.t_s, params))
+    ):
+        claims = dict(state.ahead_claims)
+        claims[vehicle] = report.t_s
+        return replace(
+            state,
+            statuses_refused=state.statuses_refused + 1,
+            ahead_claims=tuple(sorted(claims.items())),
+        )
     held = dict(state.reports)
     old = held.get(vehicle)
     if old is not None and report.t_s < old.t_s:
@@ -180,6 +192,15 @@ def hear_status(
     return replace(
         state, reports=tuple(sorted(held.items())), mission_t_s=max(state.mission_t_s, t)
     )
+
+
+def _corroborated(state: GroundState, vehicle: int, t_s: float, params: GroundParams) -> bool:
+    """Without a clock of its own the station takes a jump of mission time only when another
+    vehicle claims about the same time (all of them coming back after an outage; one liar
+    cannot push it), or when it flies a single vehicle (nothing to check it against)."""
+    if len(params.vehicles) == 1 and math.isfinite(t_s):
+        return True
+    return any(v != vehicle and abs(t - t_s) <= params.max_ahead_s for v, t in state.ahead_claims)
 
 
 def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParams) -> str:
