@@ -8,10 +8,13 @@ One JSON object a line, in the order the mission's loops consumed them (``InputR
   ``mission`` (``standoff fly``: everything, one file), ``ground`` or ``agent-<i>`` (the
   processes of ``standoff ground`` / ``standoff agent``, each its own
   ``observations-<role>.jsonl``);
-- ``{"kind": "observation", "vehicle": i, "t_s", "east_m", "north_m", "sigma_m"}``: a target
-  fix as agent ``i`` fed it to its local filter, before estimation (the camera's, after the
-  backlog merge, or one the ground sent; ``sigma_m`` null: the filter's default);
-- ``{"kind": "fused", "vehicle": i, "t_s"}``: agent ``i`` applied the fused estimate of ``t_s``;
+- ``{"kind": "observation", "vehicle": i, "t_s", "east_m", "north_m", "sigma_m", "clock_t_s"}``:
+  a target fix as agent ``i`` fed it to its local filter, before estimation (the camera's,
+  after the backlog merge, or one the ground sent; ``sigma_m`` null: the filter's default);
+  ``clock_t_s`` the agent's own clock then (its newest control tick, which it judges message
+  times by; null before the first);
+- ``{"kind": "fused", "vehicle": i, "t_s", "clock_t_s"}``: agent ``i`` applied the fused
+  estimate of ``t_s``;
 - ``{"kind": "status", "vehicle": i, "t_s", "east_m", "north_m", "course_rad", "speed_m_s",
   "link_ok", "healthy", "clock_t_s"}``: the ground station took vehicle ``i``'s status (the
   vehicle state that the fusion, the stages and the recorded samples use); ``clock_t_s`` its
@@ -109,7 +112,7 @@ class ObservationLog:
 
     # --- InputRecorder ----------------------------------------------------------------------
 
-    def observation(self, vehicle: int, obs: Observation) -> None:
+    def observation(self, vehicle: int, obs: Observation, clock_t_s: float) -> None:
         sigma = obs.sigma_m
         self._write(
             {
@@ -119,11 +122,14 @@ class ObservationLog:
                 "east_m": _number(obs.east_m),
                 "north_m": _number(obs.north_m),
                 "sigma_m": None if sigma is None else _number(sigma),
+                "clock_t_s": _number(clock_t_s),
             }
         )
 
-    def fused(self, vehicle: int, t_s: float) -> None:
-        self._write({"kind": "fused", "vehicle": vehicle, "t_s": t_s})
+    def fused(self, vehicle: int, t_s: float, clock_t_s: float) -> None:
+        self._write(
+            {"kind": "fused", "vehicle": vehicle, "t_s": t_s, "clock_t_s": _number(clock_t_s)}
+        )
 
     def status(self, vehicle: int, report: VehicleReport, clock_t_s: float | None) -> None:
         self._write(

@@ -245,6 +245,9 @@ class _Replay:
         """One of agent ``v``'s records: an observation into its filter, a fused estimate
         applied; a local estimate it makes is kept for the ground as the bus would carry it."""
         params = self.agents[v]
+        clock = _clock(record)
+        if clock is not None:  # the agent's own clock, which it judges message times by
+            self.states[v] = replace(self.states[v], now_t_s=clock)
         if record["kind"] == "observation":
             obs = agent_logic.Observed(_observation(record, params.sensor))
             self.states[v], out = agent_logic.step(self.states[v], obs, params)

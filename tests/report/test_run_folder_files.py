@@ -30,10 +30,10 @@ def test_observations_round_trip_exactly(tmp_path: Path) -> None:
     obs = Observation(12.345678901234567, "1", 0.1 + 0.2, -1e-17, None)
     report = VehicleReport(3.3, 1.0 / 3.0, 2.0, 0.7, 14.000000000000002, link_ok=False)
     with ObservationLog(path, 2, truth=True) as log:
-        log.observation(1, obs)
+        log.observation(1, obs, -math.inf)
         log.status(0, report, 3.25)
         log.local(1, 12.4, None)
-        log.fused(0, 12.6)
+        log.fused(0, 12.6, 12.5)
     recording = read_recording(path)
     assert recording.vehicles == 2
     assert recording.truth
@@ -47,6 +47,8 @@ def test_observations_round_trip_exactly(tmp_path: Path) -> None:
     assert status["east_m"] == 1.0 / 3.0
     assert status["clock_t_s"] == 3.25
     assert recording.records[2]["clock_t_s"] is None
+    assert recording.records[0]["clock_t_s"] is None  # -inf: no clock yet
+    assert recording.records[3]["clock_t_s"] == 12.5
     assert status["link_ok"] is False
     assert status["healthy"] is True
 
@@ -54,7 +56,7 @@ def test_observations_round_trip_exactly(tmp_path: Path) -> None:
 def test_a_recording_cut_short_is_read_up_to_its_last_whole_line(tmp_path: Path) -> None:
     path = tmp_path / "observations.jsonl"
     with ObservationLog(path, 1, truth=False) as log:
-        log.fused(0, 1.0)
+        log.fused(0, 1.0, 0.9)
     path.write_text(path.read_text() + '{"kind": "loc')
     assert len(read_recording(path).records) == 1
 

@@ -14,11 +14,13 @@ from app.core.mission.ground import VehicleReport
 
 
 class InputRecorder(Protocol):
-    def observation(self, vehicle: int, obs: Observation) -> None:
-        """Agent ``vehicle`` feeds ``obs`` to its local filter."""
+    def observation(self, vehicle: int, obs: Observation, clock_t_s: float) -> None:
+        """Agent ``vehicle`` feeds ``obs`` to its local filter, its own clock (newest control
+        tick, which it judges message times by; -inf before the first) at ``clock_t_s``."""
 
-    def fused(self, vehicle: int, t_s: float) -> None:
-        """Agent ``vehicle`` applies the fused estimate of mission time ``t_s``."""
+    def fused(self, vehicle: int, t_s: float, clock_t_s: float) -> None:
+        """Agent ``vehicle`` applies the fused estimate of mission time ``t_s``, its clock at
+        ``clock_t_s``."""
 
     def status(self, vehicle: int, report: VehicleReport, clock_t_s: float | None) -> None:
         """The ground station takes vehicle ``vehicle``'s status ``report``, its own mission
