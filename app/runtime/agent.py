@@ -487,7 +487,7 @@ class VehicleAgent:
         """Feed one observation to the local filter (and its estimate out when due); whether
         it was used."""
         if self._recorder is not None:
-            self._recorder.observation(self.params.vehicle, obs)
+            self._recorder.observation(self.params.vehicle, obs, self.state.now_t_s)
         self.state, out = logic.step(self.state, logic.Observed(obs), self.params)
         report = out.report
         if report is not None and not report.used:
@@ -524,7 +524,9 @@ class VehicleAgent:
             case bus.GlobalEstimate():
                 heard = logic.HeardFused(global_to_core(message))
                 if self._recorder is not None:
-                    self._recorder.fused(self.params.vehicle, heard.estimate.t_s)
+                    self._recorder.fused(
+                        self.params.vehicle, heard.estimate.t_s, self.state.now_t_s
+                    )
                 self.state, out = logic.step(self.state, heard, self.params)
             case bus.MissionState():
                 mission = logic.HeardMission(message.stage, message.active, message.t_s)

@@ -438,6 +438,21 @@ def test_a_broker_restart_mid_mission_is_survived(team_run: TeamRun) -> None:
         assert max(abs(r.distance_m - 90.0) for r in mine) < 150.0, f"vehicle {i}"
 
 
+def test_the_processes_recordings_replay_to_the_ground_s_figures(
+    team_run: TeamRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each process recorded what it was fed, in its own file; put together in the run folder
+    they replay (standoff replay) to the ground's stages and figures, the outage included."""
+    names = sorted(p.name for p in team_run.out.glob("observations*.jsonl"))
+    assert names == [f"observations-agent-{i}.jsonl" for i in range(3)] + [
+        "observations-ground.jsonl"
+    ]
+    assert main(["replay", str(team_run.out)]) == 0
+    out = capsys.readouterr().out
+    assert "stages the same, figures the same" in out, out
+    assert "were not produced" not in out, out
+
+
 # --- a team of two: SIGTERM to agent 0, then Ctrl-C on the ground --------------------------------
 
 
