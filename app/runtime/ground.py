@@ -13,7 +13,7 @@ import logging
 import math
 import random
 import time
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from app.core.mission import ground as logic
@@ -121,7 +121,7 @@ class GroundCounters:
     statuses_refused: int = 0  # stamped outside the window of its clock
     local_estimates_refused: int = 0  # outside it, of the wrong shape, or outliers
     message_errors: int = 0  # messages whose handling failed (logged, skipped)
-    outages: int = 0  # periods with no vehicle status for ``outage_after_s``
+    outages: int = 0  # periods with no vehicle status for ``outage_after_s`` (listed in report)
 
 
 @dataclass
@@ -192,10 +192,17 @@ class GroundStation:
 
     def report(self) -> dict[str, object]:
         """The station's counters, why the mission ended and its outages (for the summary)."""
+        stats = getattr(self._bus, "stats", None)
+        drops = getattr(self._bus, "drops", None)
         return {
             **dataclasses.asdict(self.counters),
             "end_reason": self.end_reason,
             "outages": [dataclasses.asdict(o) for o in self.outages],
+            # what its bus client dropped before the station saw it (malformed, refused ...)
+            "bus": dataclasses.asdict(stats)
+            if dataclasses.is_dataclass(stats) and not isinstance(stats, type)
+            else None,
+            "bus_drops": dict(drops) if isinstance(drops, Mapping) else None,
         }
 
     def _now(self) -> float | None:

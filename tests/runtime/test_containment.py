@@ -194,3 +194,26 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
     assert link.sent == 2
     assert all(math.isfinite(c.course_rad) for c in link.commands)
     assert agent.counters.tick_errors == agent.counters.message_errors == 0
+
+
+async def test_the_grounds_bus_drops_are_in_its_report() -> None:
+    plan = build_plan(load_config("test-short", MissionConfig))
+    broker = InProcessBroker()
+    async with (
+        InProcessBus(broker, client_id="ground") as ground_bus,
+        InProcessBus(broker, client_id="agent-1") as agent,
+    ):
+        station = GroundStation(plan.ground, GroundRuntimeParams(end_t_s=2.0), ground_bus, Events())
+        async with asyncio.TaskGroup() as tg:
+            run = tg.create_task(station.run())
+            await asyncio.sleep(0)
+            await agent.publish(topics.status(0), status(1.0, vehicle=1))  # not its topic
+            for t in (1.0, 2.0):
+                await agent.publish(topics.status(1), status(t, vehicle=1))
+            async with asyncio.timeout(5.0):
+                await run
+    report = station.report()
+    assert report["bus_drops"] == {**dict.fromkeys(ground_bus.drops, 0), "wrong_sender": 1}
+    bus_stats = report["bus"]
+    assert isinstance(bus_stats, dict)
+    assert bus_stats["refused"] == 1
