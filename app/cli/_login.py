@@ -30,12 +30,19 @@ def add_login_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--ca-file", metavar="PATH", help="TLS: the CA to trust (mqtts://)")
     g.add_argument("--cert-file", metavar="PATH", help="TLS: this client's certificate")
     g.add_argument("--key-file", metavar="PATH", help="TLS: this client's private key")
+    g.add_argument(
+        "--mission-key-file",
+        metavar="PATH",
+        help="seal every message with the team's key in this file and take only sealed ones "
+        "(standoff broker writes one)",
+    )
 
 
 def bus_options(args: argparse.Namespace, config: MissionConfig, identity: str) -> dict[str, Any]:
-    """``open_bus`` keywords for ``identity`` (``login``, ``tls_context``): the options, else
+    """``open_bus`` keywords for ``identity`` (``login``, ``tls_context``, ``mission_key``):
+    the options, else
     the config's ``[bus]`` keys; ``ConfigError`` with the reason on a bad one, before any I/O."""
-    from app.adapters.bus import BrokerUrl, Login, tls_context
+    from app.adapters.bus import BrokerUrl, Login, MissionKey, tls_context
     from app.errors import ConfigError
 
     keys = config.bus_login
@@ -72,4 +79,6 @@ def bus_options(args: argparse.Namespace, config: MissionConfig, identity: str) 
         options["tls_context"] = tls_context(ca_file, cert_file, key_file)
     elif key_file is not None:
         raise ConfigError("a TLS client key was given without its certificate (--cert-file)")
+    if (mission_key_file := chosen("mission_key_file")) is not None:
+        options["mission_key"] = MissionKey.load(mission_key_file)
     return options

@@ -16,7 +16,8 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "observer) and may publish only on its own topics: mosquitto.conf (no anonymous "
             "clients), acl, passwd (hashed) and secrets/<login>.password (0600), one per "
             "process, to pass as --password-file (or [bus] password_file = "
-            "'DIR/secrets/{client}.password'). Start the broker with "
+            "'DIR/secrets/{client}.password'), and secrets/mission.key, the team's key for "
+            "sealed messages (--mission-key-file). Start the broker with "
             "'mosquitto -c DIR/mosquitto.conf'. Existing files are replaced (new passwords)."
         ),
     )
@@ -45,4 +46,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  passwords, one per login: {files.directory / 'secrets'}/<login>.password")
     print(f"  start the broker: mosquitto -c {files.conf}")
     print(f"  then each process: --password-file {files.directory}/secrets/{{client}}.password")
+    print(
+        f"  and to seal every message (an untrusted broker): --mission-key-file {files.mission_key}"
+    )
     return 0

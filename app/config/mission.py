@@ -185,13 +185,16 @@ class BusLoginConfig(StrictModel):
     serves the whole team (``password_file = "secrets/{client}.password"``, as ``standoff
     broker`` writes them). Relative paths are from the working directory. The password comes
     from ``password_file`` (its first line) or the environment variable ``password_env``; TLS
-    (``mqtts://``): ``ca_file`` to trust, ``cert_file`` / ``key_file`` a client certificate."""
+    (``mqtts://``): ``ca_file`` to trust, ``cert_file`` / ``key_file`` a client certificate.
+    ``mission_key_file``: the team's shared key (hex); every message is then sealed with it and
+    only sealed ones are taken (for a broker the operator does not control)."""
 
     password_file: str | None = None
     password_env: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")] | None = None
     ca_file: str | None = None
     cert_file: str | None = None
     key_file: str | None = None
+    mission_key_file: str | None = None
 
     @model_validator(mode="after")
     def _one_password(self) -> "BusLoginConfig":

@@ -6,15 +6,28 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import math
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
 
 import aiomqtt
 import pytest
 
-from app.adapters.bus import DROP_REASONS, Bus, InProcessBroker, Login, MqttBus, encode, open_bus
+from app.adapters.bus import (
+    DROP_REASONS,
+    Bus,
+    InProcessBroker,
+    Login,
+    MalformedMessage,
+    MissionKey,
+    MissionKeyError,
+    MqttBus,
+    decode,
+    encode,
+    open_bus,
+)
 from app.adapters.bus.broker_setup import (
     DEFAULT_DIR,
     acl_text,
@@ -23,6 +36,7 @@ from app.adapters.bus.broker_setup import (
     writable,
     write_team,
 )
+from app.adapters.bus.signing import Sealer
 from app.config.mission import MissionConfig
 from app.errors import BusError, ConfigError
 from app.runtime.ports import topics
@@ -486,6 +500,8 @@ def test_write_team_keeps_secrets_private(tmp_path: Path) -> None:
     assert "ground-secret-xyz" not in files.passwd.read_text(encoding="utf-8")
     assert "user agent-1\n" in files.acl.read_text(encoding="utf-8")
     assert "user agent-2" not in files.acl.read_text(encoding="utf-8")
+    assert files.mission_key.stat().st_mode & 0o777 == 0o600
+    assert len(MissionKey.load(files.mission_key).secret) == 32
 
 
 # --- the command line: standoff broker, and each process's login ----------------------------
@@ -503,6 +519,7 @@ def test_standoff_broker_writes_a_team_that_mosquitto_runs(tmp_path: Path) -> No
 
 def login_args(**options: str | None) -> argparse.Namespace:
     fields = ("broker", "password_file", "password_env", "ca_file", "cert_file", "key_file")
+    fields += ("mission_key_file",)
     return argparse.Namespace(**{f: options.get(f) for f in fields})
 
 
@@ -532,6 +549,10 @@ def test_each_process_logs_in_as_its_identity_from_the_config_or_the_options(
     monkeypatch.setenv("AGENT_PW", "from-env")
     options = bus_options(login_args(password_env="AGENT_PW"), config, "agent-0")
     assert options["login"] == Login("agent-0", "from-env")  # the option wins over the file
+    keyed = mission_config({**table, "mission_key_file": str(files.mission_key)})
+    assert bus_options(login_args(), keyed, "agent-1")["mission_key"] == MissionKey.load(
+        files.mission_key
+    )
     plain = mission_config("mqtt://127.0.0.1:1883")
     assert bus_options(login_args(), plain, "ground") == {}  # an anonymous broker
     assert bus_options(login_args(broker="mqtt://ground:pw@h:1"), plain, "ground") == {
@@ -547,3 +568,108 @@ def test_each_process_logs_in_as_its_identity_from_the_config_or_the_options(
             bus_options(args, config_, "agent-1")
     with pytest.raises(ConfigError, match="not both"):
         mission_config({"url": "mqtt://h:1", "password_file": "f", "password_env": "E"})
+
+
+# --- sealed messages: a per-mission key, for a broker the operator does not control ---------
+
+
+@pytest.fixture(params=["inproc", "mqtt"])
+async def sealed(request: pytest.FixtureRequest) -> AsyncIterator[SealedHarness]:
+    """Two clients holding the mission key, and a way to put raw bytes on the bus."""
+    key = MissionKey.generate()
+    if request.param == "inproc":
+        broker = InProcessBroker()
+
+        async def inject_inproc(topic: str, payload: bytes) -> None:
+            broker.route(topic, payload)
+
+        async with (
+            open_bus(None, broker=broker, client_id="a", mission_key=key) as a,
+            open_bus(None, broker=broker, client_id="b", mission_key=key) as b,
+        ):
+            yield SealedHarness(key, a, b, inject_inproc)
+        return
+    mosquitto: Mosquitto = request.getfixturevalue("mosquitto")
+    async with (
+        open_bus(mosquitto.url, client_id="a", mission_key=key, connect_timeout_s=WAIT_S) as a,
+        open_bus(mosquitto.url, client_id="b", mission_key=key, connect_timeout_s=WAIT_S) as b,
+        aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="raw") as raw,
+    ):
+
+        async def inject_mqtt(topic: str, payload: bytes) -> None:
+            await raw.publish(topic, payload, qos=1)
+
+        yield SealedHarness(key, a, b, inject_mqtt)
+
+
+@dataclasses.dataclass
+class SealedHarness:
+    key: MissionKey
+    sender: Bus
+    receiver: Bus
+    inject: Callable[[str, bytes], Awaitable[None]]
+
+
+async def test_with_a_mission_key_only_fresh_sealed_messages_are_taken(
+    sealed: SealedHarness,
+) -> None:
+    h = sealed
+    topic = topics.command()
+    old = Sealer(h.key).seal(topic.value, encode(command("ground")))  # sealed before the rest
+    async with h.receiver.subscribe(topics.ALL_COMMANDS) as commands:
+        await h.sender.publish(topic, command("ground", (1,)))
+        async with asyncio.timeout(WAIT_S):
+            assert (await anext(commands))[1] == command("ground", (1,))
+        await h.inject(topic.value, encode(command("ground")))  # not sealed: anyone's forgery
+        await h.inject(topic.value, Sealer(MissionKey.generate()).seal(topic.value, b"{}"))
+        moved = Sealer(h.key).seal(topics.command(2).value, encode(command("ground")))
+        await h.inject(topic.value, moved)  # sealed for another topic
+        tampered = bytearray(Sealer(h.key).seal(topic.value, encode(command("ground"))))
+        tampered[-3] ^= 1
+        await h.inject(topic.value, bytes(tampered))
+        await h.inject(topic.value, old)  # a replay of something older than what was taken
+        await h.sender.publish(topic, command("ground", (2,)))
+        async with asyncio.timeout(WAIT_S):
+            assert (await anext(commands))[1] == command("ground", (2,))
+        assert commands.pending() == 0
+    drops = h.receiver.drops
+    assert (drops["unsigned"], drops["bad_signature"], drops["replayed"]) == (1, 3, 1)
+    assert sum(drops.values()) == 5
+    assert h.receiver.stats.refused == 5
+
+
+async def test_a_sealed_presence_older_than_what_it_outlives_is_still_taken(
+    sealed: SealedHarness,
+) -> None:
+    """A last will is sealed when its client connects; the broker sends it after the client's
+    later messages on the same presence topic."""
+    h = sealed
+    will = Sealer(h.key).seal(topics.link(1).value, encode(presence("agent-1", 1)))
+    online = LinkState(sender="agent-1", t_s=2.0, online=True, vehicle=1)
+    async with h.receiver.subscribe(topics.ALL_LINKS) as links:
+        await h.sender.publish(topics.link(1), online)
+        await h.inject(topics.link(1).value, will)
+        async with asyncio.timeout(WAIT_S):
+            assert [(await anext(links))[1] for _ in range(2)] == [online, presence("agent-1", 1)]
+
+
+def test_a_receiver_without_the_key_counts_sealed_payloads_as_malformed() -> None:
+    payload = encode(mission("ground"))
+    sealed_bytes = Sealer(MissionKey.generate()).seal(topics.MISSION.value, payload)
+    assert sealed_bytes.endswith(payload)
+    with pytest.raises(MalformedMessage):
+        decode(sealed_bytes)
+
+
+def test_mission_keys_load_from_their_files(tmp_path: Path) -> None:
+    key = MissionKey.generate()
+    path = tmp_path / "mission.key"
+    path.write_text(key.hex() + "\n", encoding="ascii")
+    assert MissionKey.load(path) == key
+    assert key.hex() not in repr(key)
+    for text, reason in [("zz", "non-hexadecimal"), ("abcd", "at least 16 bytes"), ("", "16")]:
+        path.write_text(text, encoding="ascii")
+        with pytest.raises(MissionKeyError, match=reason):
+            MissionKey.load(path)
+    with pytest.raises(MissionKeyError, match="cannot read"):
+        MissionKey.load(tmp_path / "missing.key")

@@ -280,9 +280,15 @@ def running_broker(workdir: Path) -> Iterator[Mosquitto]:
 
 def login_options(broker: Mosquitto) -> list[str]:
     """Each process logs in as its identity, its password from the file ``standoff broker``
-    wrote for it."""
+    wrote for it, and seals every message with the team's key."""
     assert broker.team is not None
-    return ["--password-file", str(broker.team.directory / "secrets" / "{client}.password")]
+    secrets = broker.team.directory / "secrets"
+    return [
+        "--password-file",
+        str(secrets / "{client}.password"),
+        "--mission-key-file",
+        str(broker.team.mission_key),
+    ]
 
 
 # --- three agents, the broker restarted mid-track ------------------------------------------------
@@ -340,7 +346,8 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         assert report["counters"]["agent"]["ticks"] > 100
         assert report["counters"]["link"]["setpoints"] > 100
         assert report["counters"]["bus"]["malformed"] == 0
-        # through the logins and the ACL: nothing of the team's own was refused or denied
+        # through the logins, the ACL and the seals: nothing of the team's own was refused,
+        # denied or taken for a forgery
         assert report["counters"]["bus"]["refused"] == 0
         assert report["counters"]["bus"]["denied"] == 0
         assert (out / f"vehicle-{i + 1}.tlog").stat().st_size > 10_000

@@ -18,6 +18,7 @@ from app.adapters.bus.base import (
 from app.adapters.bus.codec import MalformedMessage, UnsupportedVersion, decode, encode
 from app.adapters.bus.inproc import InProcessBroker, InProcessBus
 from app.adapters.bus.mqtt import Backoff, BrokerUrl, BusUrlError, Login, MqttBus, tls_context
+from app.adapters.bus.signing import MissionKey, MissionKeyError
 
 __all__ = [
     "DEFAULT_QUEUE_SIZE",
@@ -33,6 +34,8 @@ __all__ = [
     "InProcessBus",
     "Login",
     "MalformedMessage",
+    "MissionKey",
+    "MissionKeyError",
     "MqttBus",
     "Subscription",
     "UnsupportedVersion",
@@ -53,13 +56,14 @@ def open_bus(
     queue_size: int = DEFAULT_QUEUE_SIZE,
     broker: InProcessBroker | None = None,
     identity: str | None = None,
+    mission_key: MissionKey | None = None,
     **mqtt_options: Any,
 ) -> Bus:
     """A bus client to enter with ``async with``: in-process when ``url`` is None, else MQTT.
 
     ``will`` is published for the client if it vanishes, ``birth`` each time it connects.
     ``identity``: the client publishes only as this identity, on its topics (MQTT: default the
-    ``login``'s user name).
+    ``login``'s user name). ``mission_key``: seal what it sends, take only what is sealed.
 
     ``broker`` shares one in-process broker between clients (in-process only); ``mqtt_options``
     are ``MqttBus`` keywords (qos, backoff, connect_timeout_s, op_timeout_s, tls_context, ...).
@@ -75,6 +79,7 @@ def open_bus(
             birth=birth,
             queue_size=queue_size,
             identity=identity,
+            mission_key=mission_key,
         )
     if broker is not None:
         raise TypeError("an in-process broker was given with an MQTT URL")
@@ -85,5 +90,6 @@ def open_bus(
         birth=birth,
         queue_size=queue_size,
         identity=identity,
+        mission_key=mission_key,
         **mqtt_options,
     )

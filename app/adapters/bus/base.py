@@ -15,7 +15,9 @@ has a bounded queue; when a slow consumer lets it fill, the oldest message is dr
 counted (the freshest data is what a control loop wants).
 
 A bus given an ``identity`` (the client's login on an authenticating broker) also refuses to
-publish anything but its own messages on its own topics (``BusError``).
+publish anything but its own messages on its own topics (``BusError``). A bus given a
+``mission_key`` seals every payload it sends and takes only payloads sealed with that key,
+fresh (``app.adapters.bus.signing``: for a broker the operator does not control).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from collections.abc import Iterable, Mapping
 from types import TracebackType
 from typing import Self
 
-from app.adapters.bus import codec
+from app.adapters.bus import codec, signing
 from app.errors import BusError
 from app.runtime.ports import topics
 from app.runtime.ports.messages import Message
@@ -52,13 +54,13 @@ class BusStats:
     wrong_version: int = 0  # well-formed payloads of another schema version
     unsent: int = 0  # QoS 0 messages not sent because the broker was out of reach (MQTT)
     reconnects: int = 0  # connections after the first one (MQTT: the broker came back)
-    refused: int = 0  # well-formed messages their topic does not permit (``Bus.drops``: why)
+    refused: int = 0  # messages not believed: the identity rule, a seal (``Bus.drops``: why)
     denied: int = 0  # QoS 1/2 publishes of this client the broker refused (its ACL; MQTT 5)
 
 
 MALFORMED = "malformed"
 WRONG_VERSION = "wrong_version"
-DROP_REASONS = (MALFORMED, WRONG_VERSION, *topics.REFUSALS)
+DROP_REASONS = (MALFORMED, WRONG_VERSION, *topics.REFUSALS, *signing.REASONS)
 """Why a received payload is dropped before any consumer sees it (the keys of ``Bus.drops``)."""
 
 
@@ -207,11 +209,15 @@ class Bus(abc.ABC):
         client_id: str,
         queue_size: int = DEFAULT_QUEUE_SIZE,
         identity: str | None = None,
+        mission_key: signing.MissionKey | None = None,
     ) -> None:
         if queue_size < 1:
             raise ValueError(f"queue_size must be at least 1, got {queue_size}")
         self.client_id = client_id
         self.identity = identity
+        self.mission_key = mission_key
+        self._sealer = signing.Sealer(mission_key) if mission_key is not None else None
+        self._counters: dict[tuple[str, str], int] = {}  # (topic, sender) -> last seal taken
         self._default_queue_size = queue_size
         self._subscriptions: dict[TopicFilter, list[Subscription]] = {}
         self._counts: collections.Counter[str] = collections.Counter()
@@ -226,8 +232,9 @@ class Bus(abc.ABC):
     @property
     def drops(self) -> Mapping[str, int]:
         """Received payloads dropped before any consumer saw them, by reason (``DROP_REASONS``:
-        ``malformed``, ``wrong_version``, and the identity rule's ``wrong_sender``,
-        ``wrong_vehicle``, ``wrong_kind``, ``unknown_topic``); a copy, every reason present."""
+        ``malformed``, ``wrong_version``, the identity rule's ``wrong_sender``,
+        ``wrong_vehicle``, ``wrong_kind``, ``unknown_topic``, and with a mission key
+        ``unsigned``, ``bad_signature``, ``replayed``); a copy, every reason present."""
         return {reason: self._drops[reason] for reason in DROP_REASONS}
 
     @property
@@ -283,7 +290,7 @@ class Bus(abc.ABC):
             raise BusClosed(f"bus {self.client_id!r} is not open; cannot publish on {topic}")
         if self.identity is not None:
             self._check_own(topic, message)
-        sent = await self._send(topic, codec.encode(message), qos, retain)
+        sent = await self._send(topic, self._wire(topic, message), qos, retain)
         self._counts["published" if sent else "unsent"] += 1
 
     def subscribe(
@@ -296,6 +303,11 @@ class Bus(abc.ABC):
         """
         size = self._default_queue_size if queue_size is None else queue_size
         return Subscription(self, as_filter(topic_filter), size)
+
+    def _wire(self, topic: Topic, message: Message) -> bytes:
+        """``message`` as the bytes to send on ``topic``: encoded, and sealed with a key."""
+        payload = codec.encode(message)
+        return payload if self._sealer is None else self._sealer.seal(topic.value, payload)
 
     def _check_own(self, topic: Topic, message: Message) -> None:
         """A client with an identity publishes only as itself, only on its own topics."""
@@ -354,6 +366,13 @@ class Bus(abc.ABC):
         if not targets:
             return
         self._counts["received"] += 1
+        counter = None
+        if self.mission_key is not None:
+            opened = signing.unseal(self.mission_key, topic_name, payload)
+            if isinstance(opened, str):
+                self._drop(opened, "?", topic_name, "not sealed with the mission key")
+                return
+            payload, counter = opened.payload, opened.counter
         try:
             topic = Topic(topic_name)
             message = codec.decode(payload)
@@ -365,10 +384,12 @@ class Bus(abc.ABC):
             return
         reason = topics.refusal(topic, message)
         if reason is not None:
-            self._counts["refused"] += 1
             self._drop(
                 reason, message.sender, topic_name, f"a {topics.kind_of(message)} not believed"
             )
+            return
+        if counter is not None and not self._fresh(topic, message, counter):
+            self._drop(signing.REPLAYED, message.sender, topic_name, "older than one taken")
             return
         for topic_filter in targets:
             for sub in self._subscriptions[topic_filter]:
@@ -377,9 +398,21 @@ class Bus(abc.ABC):
                     self._counts["dropped"] += 1
                     log.debug("bus %s: %r full, dropped its oldest", self.client_id, sub)
 
+    def _fresh(self, topic: Topic, message: Message, counter: int) -> bool:
+        """Whether a sealed message is no older than the last one taken from its sender on its
+        topic (the same one again is: a retained copy, or one per overlapping filter). Not on
+        presence topics: a last will is sealed as its client connects, before what it outlives."""
+        bound = topics.binding(topic)
+        if bound is not None and bound.kind == "link":
+            return True
+        key = (topic.value, message.sender)
+        if counter < self._counters.get(key, 0):
+            return False
+        self._counters[key] = counter
+        return True
+
     def _drop(self, reason: str, sender: str, topic_name: str, detail: object) -> None:
-        if reason in (MALFORMED, WRONG_VERSION):
-            self._counts[reason] += 1
+        self._counts[reason if reason in (MALFORMED, WRONG_VERSION) else "refused"] += 1
         self._drops[reason] += 1
         self._drop_log.dropped(reason, sender, topic_name, detail)
 

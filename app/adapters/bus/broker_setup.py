@@ -21,6 +21,7 @@ import secrets
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from app.adapters.bus.signing import MissionKey
 from app.runtime.ports import topics
 
 OBSERVER = "observer"
@@ -30,6 +31,7 @@ PASSWD_FILE = "passwd"
 ACL_FILE = "acl"
 CONF_FILE = "mosquitto.conf"
 SECRETS_DIR = "secrets"
+MISSION_KEY_FILE = "mission.key"  # in SECRETS_DIR: the team's key for sealed messages
 
 _ITERATIONS = 101  # mosquitto 2.0's mosquitto_passwd
 _SALT_BYTES = 12
@@ -124,6 +126,7 @@ class TeamFiles:
     passwd: Path
     acl: Path
     password_files: Mapping[str, Path]
+    mission_key: Path
 
     def password(self, identity: str) -> str:
         return self.password_files[identity].read_text(encoding="utf-8").strip()
@@ -147,8 +150,9 @@ def write_team(
     extra: Sequence[str] = (),
 ) -> TeamFiles:
     """Write a team's broker files into ``directory``: ``mosquitto.conf``, ``acl``, ``passwd``
-    (mode 0640: chgrp it to mosquitto's group) and ``secrets/<login>.password`` (0600, one per
-    process: its ``--password-file``). New random passwords unless ``passwords`` gives them;
+    (mode 0640: chgrp it to mosquitto's group), ``secrets/<login>.password`` (0600, one per
+    process: its ``--password-file``) and ``secrets/mission.key`` (0600: the team's key for
+    sealed messages, ``--mission-key-file``). New random passwords unless ``passwords`` gives them;
     ``extra`` logins are added with no topic to write (read-only, as the observer)."""
     directory = directory.resolve()
     logins = (*identities(vehicles), *extra)
@@ -164,5 +168,7 @@ def write_team(
     for who, password in chosen.items():
         files[who] = directory / SECRETS_DIR / f"{who}.password"
         _write(files[who], password + "\n", 0o600)
+    mission_key = directory / SECRETS_DIR / MISSION_KEY_FILE
+    _write(mission_key, MissionKey.generate().hex() + "\n", 0o600)
     os.chmod(directory / SECRETS_DIR, 0o700)
-    return TeamFiles(directory, conf, passwd, acl, files)
+    return TeamFiles(directory, conf, passwd, acl, files, mission_key)

@@ -12,8 +12,8 @@ import asyncio
 import itertools
 import logging
 
-from app.adapters.bus import codec
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, Will
+from app.adapters.bus.signing import MissionKey
 from app.runtime.ports.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
@@ -62,9 +62,13 @@ class InProcessBus(Bus):
         birth: Birth | None = None,
         queue_size: int = DEFAULT_QUEUE_SIZE,
         identity: str | None = None,
+        mission_key: MissionKey | None = None,
     ) -> None:
         super().__init__(
-            client_id=client_id or f"inproc-{next(_ids)}", queue_size=queue_size, identity=identity
+            client_id=client_id or f"inproc-{next(_ids)}",
+            queue_size=queue_size,
+            identity=identity,
+            mission_key=mission_key,
         )
         self.broker = broker if broker is not None else InProcessBroker()
         self.will = will
@@ -74,7 +78,9 @@ class InProcessBus(Bus):
         self.broker._join(self)
         if self.birth is not None:
             birth = self.birth
-            self.broker.route(birth.topic.value, codec.encode(birth.message), retain=birth.retain)
+            self.broker.route(
+                birth.topic.value, self._wire(birth.topic, birth.message), retain=birth.retain
+            )
             self._counts["published"] += 1
 
     async def _stop(self, *, crashed: bool) -> None:
@@ -82,7 +88,9 @@ class InProcessBus(Bus):
         if crashed and self.will is not None:
             log.info("bus %s exited on an error: publishing its will", self.client_id)
             self.broker.route(
-                self.will.topic.value, codec.encode(self.will.message), retain=self.will.retain
+                self.will.topic.value,
+                self._wire(self.will.topic, self.will.message),
+                retain=self.will.retain,
             )
 
     async def _send(self, topic: Topic, payload: bytes, qos: int | None, retain: bool) -> bool:

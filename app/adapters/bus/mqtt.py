@@ -38,8 +38,8 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
-from app.adapters.bus import codec
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, BusClosed, Will
+from app.adapters.bus.signing import MissionKey
 from app.errors import BusError, ConfigError
 from app.runtime.ports.topics import Topic, TopicFilter
 
@@ -376,6 +376,9 @@ class MqttBus(Bus):
     identity
         The identity the client publishes as (default: the login's user name): the bus then
         refuses to publish a message from anyone else or on a topic not its own.
+    mission_key
+        Seal every payload with this key and take only payloads sealed with it
+        (``app.adapters.bus.signing``).
     sleep
         The clock's sleep, used for the reconnect back-off (injectable for tests).
     """
@@ -396,12 +399,14 @@ class MqttBus(Bus):
         tls_context: ssl.SSLContext | None = None,
         login: Login | None = None,
         identity: str | None = None,
+        mission_key: MissionKey | None = None,
         sleep: Sleep = asyncio.sleep,
     ) -> None:
         super().__init__(
             client_id=client_id or f"standoff-{secrets.token_hex(4)}",
             queue_size=queue_size,
             identity=identity if identity is not None else (login.username if login else None),
+            mission_key=mission_key,
         )
         self.url = url if isinstance(url, BrokerUrl) else BrokerUrl.parse(url)
         if login is not None:
@@ -471,7 +476,7 @@ class MqttBus(Bus):
                 async with asyncio.timeout(self.op_timeout_s):
                     await self._client.publish(
                         self.will.topic.value,
-                        codec.encode(self.will.message),
+                        self._wire(self.will.topic, self.will.message),
                         qos=self.will.qos,
                         retain=self.will.retain,
                     )
@@ -492,7 +497,7 @@ class MqttBus(Bus):
         if self.will is not None:
             will = aiomqtt.Will(
                 topic=self.will.topic.value,
-                payload=codec.encode(self.will.message),
+                payload=self._wire(self.will.topic, self.will.message),
                 qos=self.will.qos,
                 retain=self.will.retain,
             )
@@ -556,7 +561,7 @@ class MqttBus(Bus):
     async def _announce(self, client: aiomqtt.Client, birth: Birth) -> None:
         await client.publish(
             birth.topic.value,
-            codec.encode(birth.message),
+            self._wire(birth.topic, birth.message),
             qos=birth.qos,
             retain=birth.retain,
             timeout=self.op_timeout_s,
