@@ -14,7 +14,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="re-draw a run folder's figures (PNG) from its files",
         description=(
             "Re-draw a run folder's figures (trajectories.png, distance_error.png, "
-            "phase_difference.png) from its track.csv and config.json, without flying."
+            "phase_difference.png, estimate_error.png) from its track.csv and config.json, "
+            "without flying."
         ),
     )
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a run folder of standoff fly")

@@ -67,8 +67,9 @@ def broken_at_wraps(
 def plot_mission(
     samples: Sequence[TeamSample], radius_m: float, out_dir: Path, *, title: str = ""
 ) -> list[Path]:
-    """Write trajectories.png, distance_error.png and phase_difference.png; return their paths.
-    ``title`` (the run's name, say) heads each figure, before what it draws."""
+    """Write trajectories.png, distance_error.png, phase_difference.png and, when the samples
+    carry the fused estimate, estimate_error.png; return their paths. ``title`` (the run's
+    name, say) heads each figure, before what it draws."""
     out_dir.mkdir(parents=True, exist_ok=True)
     parts = _parts(samples)
     if not parts:
@@ -156,7 +157,45 @@ def plot_mission(
         fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
+    if any(s.estimate is not None for s in samples):
+        written.append(_plot_estimate(parts, rows, cols, out_dir, title))
     return written
+
+
+def estimate_error_m(sample: TeamSample) -> float | None:
+    """How far the fused estimate is from the true target (m); None with no estimate (or no
+    truth: a run scored about its estimate has none to compare)."""
+    if sample.estimate is None:
+        return None
+    e, n = sample.estimate[:2]
+    return math.hypot(e - sample.target_east_m, n - sample.target_north_m)
+
+
+def _plot_estimate(
+    parts: dict[str, list[TeamSample]], rows: int, cols: int, out_dir: Path, title: str
+) -> Path:
+    """estimate_error.png: the fused estimate's position error per part, its RMS in the title."""
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.4 * rows), squeeze=False)
+    for ax, (key, group) in zip(axes.flat, parts.items(), strict=False):
+        pts = [(s.t_s, e) for s in group if (e := estimate_error_m(s)) is not None]
+        if pts:
+            rms = math.sqrt(sum(e * e for _, e in pts) / len(pts))
+            ax.plot(*zip(*pts, strict=True), "r-", lw=1, marker="o" if len(pts) < 10 else None)
+            ax.set_title(f"{_title(key)}: RMS {rms:.2f} m")
+        else:
+            ax.set_title(f"{_title(key)}: no estimate")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("estimate error (m)")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(parts) :]:
+        ax.axis("off")
+    fig.suptitle(_heading(title, "fused target estimate: position error against the truth"))
+    fig.tight_layout()
+    path = out_dir / "estimate_error.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _heading(title: str, what: str) -> str:

@@ -122,7 +122,12 @@ def test_plot_redraws_the_figures_from_the_files(run_dir: Path, tmp_path: Path) 
     out = tmp_path / "figures"
     assert main(["plot", str(run_dir), "--out", str(out)]) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["distance_error.png", "phase_difference.png", "trajectories.png"]
+    assert names == [
+        "distance_error.png",
+        "estimate_error.png",
+        "phase_difference.png",
+        "trajectories.png",
+    ]
     for name in names:
         image = mpimg.imread(out / name)
         assert image.shape[0] > 200

@@ -152,6 +152,7 @@ def test_plot_redraws_a_run_folder_from_its_files(
     assert main(["plot", str(run)]) == 0
     assert sorted(p.name for p in run.glob("*.png")) == [
         "distance_error.png",
+        "estimate_error.png",
         "phase_difference.png",
         "trajectories.png",
     ]
