@@ -224,3 +224,10 @@ def test_without_a_clock_the_team_back_from_an_outage_moves_mission_time_one_lia
     state, out = ground_logic.step(state, back, GROUND)
     assert not out.refused
     assert state.mission_t_s == 30.1
+
+
+def test_a_forged_fused_estimate_stamped_away_from_the_local_filters_time_is_judged_too() -> None:
+    state, p, _v, t = flying_agent()
+    off = GlobalEstimate(t + 4.0, np.array([500.0, 0, 0, 0, 0, 0.0]), np.eye(6), (("0", 1.0),))
+    _state, out = agent_logic.step(state, agent_logic.HeardFused(off), p)
+    assert "from the agent's own estimate" in out.refused

@@ -224,7 +224,7 @@ def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParam
             return "non-finite per-model moments"
     fused = state.fused
     live = estimate.t_s - state.last_taken_t_s <= params.coast_after_s
-    if fused is None or not live or abs(estimate.t_s - fused.t_s) > params.main.max_age_s:
+    if fused is None or not live:
         return ""
     model = params.prediction_model
     dt = estimate.t_s - fused.t_s
