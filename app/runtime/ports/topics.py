@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 from app.errors import BusError
 
@@ -212,7 +213,11 @@ def binding(topic: Topic | str) -> Binding | None:
     feed: not the mission's to police). A topic inside it that the layout does not have is
     bound to nobody (``senders`` empty): nothing published there is believed.
     """
-    name = topic.value if isinstance(topic, Topic) else topic
+    return _binding(topic.value if isinstance(topic, Topic) else topic)
+
+
+@functools.lru_cache(maxsize=1024)  # a mission has a few dozen topics; any flood is bounded
+def _binding(name: str) -> Binding | None:
     levels = tuple(name.split("/"))
     if levels[: len(_ROOT_LEVELS)] != _ROOT_LEVELS:
         return None
