@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from app.report.mission_plots import plot_mission
     from app.report.run_folder import (
         CONFIG_FILE,
+        SUMMARY_FILE,
         TRACK_FILE,
         read_run_config,
         read_track_samples,
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     title = run_title(run_dir, "")
     radius_m = args.radius_m
     if radius_m is None:
-        if not (run_dir / CONFIG_FILE).exists():
+        if not (run_dir / CONFIG_FILE).exists() and not (run_dir / SUMMARY_FILE).exists():
             raise InputError(f"{run_dir}: no {CONFIG_FILE} (an older run folder): give --radius-m")
         mission, _ = read_run_config(run_dir)
         radius_m = mission.radius_m

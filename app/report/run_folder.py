@@ -118,12 +118,21 @@ def read_json(path: Path) -> dict[str, Any]:
 
 
 def read_run_config(run_dir: Path) -> tuple["MissionConfig", "EstimatorConfig"]:
-    """The mission and estimator configs of a run folder (``config.json``), validated."""
+    """The mission and estimator configs of a run folder (``config.json``), validated. A
+    folder without one but with the mission config in its ``summary.json`` (``run.config``)
+    gets that, with the estimator file it names as it is now."""
     from app.config.estimator import EstimatorConfig
-    from app.config.loading import validate_config
+    from app.config.loading import load_config, validate_config
     from app.config.mission import MissionConfig
 
     path = run_dir / CONFIG_FILE
+    if not path.exists() and (run_dir / SUMMARY_FILE).exists():
+        run = read_json(run_dir / SUMMARY_FILE).get("run")
+        raw = run.get("config") if isinstance(run, dict) else None
+        if isinstance(raw, dict):
+            source = f"{run_dir / SUMMARY_FILE}: run.config"
+            mission = validate_config(raw, MissionConfig, source)
+            return mission, load_config(mission.estimator.config, EstimatorConfig)
     document = read_json(path)
     if document.get("schema") != CONFIG_SCHEMA or not {"mission", "estimator"} <= set(document):
         raise InputError(f"{path}: not a config.json of schema {CONFIG_SCHEMA}")

@@ -91,6 +91,15 @@ def test_config_json_holds_the_mission_and_its_estimator(tmp_path: Path) -> None
     assert len(estimator.imm.models) >= 2
 
 
+def test_a_folder_without_config_json_reads_the_summary_s_run_block(tmp_path: Path) -> None:
+    config = load_config("test-short", MissionConfig)
+    summary = {"run": {"config": config.model_dump(mode="json")}}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    mission, estimator = read_run_config(tmp_path)
+    assert mission == config
+    assert estimator.imm.models
+
+
 def _sample(t: float, stage: str, angles_deg: tuple[float, ...]) -> TeamSample:
     vehicles = tuple(
         VehicleSample(
