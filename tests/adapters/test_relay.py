@@ -148,7 +148,9 @@ def test_gcs_endpoints_parse_as_px4_sitl_and_mavproxy_write_them():
     assert udp_endpoint_of_url("serial:///dev/ttyUSB0:57600") is None
     assert udp_endpoint_of_url("tcpin://0.0.0.0:5760") is None
     assert udp_endpoint_of_url("tcp://127.0.0.1:5760") == UdpEndpoint("tcpout", "127.0.0.1", 5760)
-    assert udp_endpoint_of_url("tcpout://127.0.0.1:5770").mode == "tcpout"
+    assert udp_endpoint_of_url("tcpout://127.0.0.1:5770") == UdpEndpoint(
+        "tcpout", "127.0.0.1", 5770
+    )
 
 
 # --- the relay ------------------------------------------------------------------------------

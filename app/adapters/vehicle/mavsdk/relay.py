@@ -33,6 +33,7 @@ import contextlib
 import functools
 import ipaddress
 import logging
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -57,6 +58,7 @@ MAX_LOGGED_FAULTS: Final = 5
 TCP_CONNECT_TIMEOUT_S: Final = 10.0
 TCP_RETRY_S: Final = 1.0
 TCP_READ_BYTES: Final = 16384
+RECEIVE_BUFFER_BYTES: Final = 1 << 20
 
 
 @dataclass(slots=True)
@@ -88,6 +90,15 @@ class _Side(asyncio.DatagramProtocol):
 
     def error_received(self, exc: Exception) -> None:
         self._on_error(exc)
+
+
+def _enlarge_receive_buffer(transport: asyncio.DatagramTransport) -> None:
+    """Ask for a 1 MiB receive buffer (best effort, capped by the OS): the default holds a few
+    hundred datagrams, which a loaded machine's scheduling hiccup can overflow."""
+    sock = transport.get_extra_info("socket")
+    if sock is not None:
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
 
 
 def _any_host(host: str) -> str:
@@ -162,10 +173,14 @@ class MavlinkRelay:
                 local_addr=("127.0.0.1", 0),
             )
             self._app_port = self._app_t.get_extra_info("sockname")[1]
+            _enlarge_receive_buffer(self._app_t)
         except OSError as exc:
             await self._aclose()
             raise LinkError(f"cannot open the relay's local port for MAVSDK: {exc}") from exc
         await self._open_gcs(loop)
+        for transport in (self._vehicle_t, self._gcs_t):
+            if transport is not None:
+                _enlarge_receive_buffer(transport)
         log.info("%s: %s <-> %s%s", self.name, v.url, self.app_url, self._gcs_text())
         return self
 
