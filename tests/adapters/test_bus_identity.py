@@ -9,6 +9,7 @@ import asyncio
 import dataclasses
 import logging
 import math
+import subprocess
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from app.adapters.bus import (
     decode,
     encode,
     open_bus,
+    tls_context,
 )
 from app.adapters.bus.broker_setup import (
     DEFAULT_DIR,
@@ -518,9 +520,8 @@ def test_standoff_broker_writes_a_team_that_mosquitto_runs(tmp_path: Path) -> No
 
 
 def login_args(**options: str | None) -> argparse.Namespace:
-    fields = ("broker", "password_file", "password_env", "ca_file", "cert_file", "key_file")
-    fields += ("mission_key_file",)
-    return argparse.Namespace(**{f: options.get(f) for f in fields})
+    fields = "broker password_file password_env ca_file cert_file key_file mission_key_file"
+    return argparse.Namespace(**{f: options.get(f) for f in fields.split()})
 
 
 def mission_config(bus: object) -> MissionConfig:
@@ -673,3 +674,72 @@ def test_mission_keys_load_from_their_files(tmp_path: Path) -> None:
             MissionKey.load(path)
     with pytest.raises(MissionKeyError, match="cannot read"):
         MissionKey.load(tmp_path / "missing.key")
+
+
+# --- TLS client certificates: the certificate's common name is the login --------------------
+
+
+def openssl(*args: str) -> None:
+    subprocess.run(["openssl", *args], check=True, capture_output=True, timeout=30)
+
+
+def certificate(tmp_path: Path, name: str, ca: tuple[Path, Path] | None, *extra: str) -> Path:
+    """An EC key and certificate for CN=``name``, signed by ``ca`` (self-signed without)."""
+    key, cert = tmp_path / f"{name}.key", tmp_path / f"{name}.crt"
+    openssl("ecparam", "-name", "prime256v1", "-genkey", "-noout", "-out", str(key))
+    if ca is None:
+        openssl("req", "-x509", "-new", "-key", str(key), "-days", "1", "-subj", f"/CN={name}",
+                "-out", str(cert))  # fmt: skip
+        return cert
+    csr = tmp_path / f"{name}.csr"
+    openssl("req", "-new", "-key", str(key), "-subj", f"/CN={name}", "-out", str(csr))
+    openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
+            "-CAcreateserial", "-days", "1", "-out", str(cert), *extra)  # fmt: skip
+    return cert
+
+
+@pytest.mark.slow
+async def test_with_client_certificates_the_common_name_is_the_login(tmp_path: Path) -> None:
+    """The shipped configuration with a TLS listener that requires a client certificate and
+    takes its CN as the login (the commented lines of mosquitto.conf): agent-1's certificate
+    gets it agent-1's topics, and only those; no certificate, no connection."""
+    from app.cli._login import bus_options
+
+    ca = (certificate(tmp_path, "standoff-ca", None), tmp_path / "standoff-ca.key")
+    ext = tmp_path / "san.ext"
+    ext.write_text("subjectAltName=IP:127.0.0.1\n", encoding="ascii")
+    server = certificate(tmp_path, "127.0.0.1", ca, "-extfile", str(ext))
+    client = certificate(tmp_path, "agent-1", ca)
+    tls_lines = (
+        f"cafile {ca[0]}\ncertfile {server}\nkeyfile {tmp_path / '127.0.0.1.key'}\n"
+        "require_certificate true\nuse_identity_as_username true\n"
+    )
+    broker = Mosquitto(tmp_path, team=3, tls=True, extra_config=tls_lines)
+    broker.start()
+    try:
+        args = login_args(
+            broker=broker.url,
+            ca_file=str(ca[0]),
+            cert_file=str(client),
+            key_file=str(tmp_path / "agent-1.key"),
+        )
+        options = bus_options(args, mission_config(broker.url), "agent-1")
+        assert "login" not in options  # no password: the certificate is the login
+        async with (
+            open_bus(broker.url, client_id="agent-1", identity="agent-1", **options) as agent1,
+            agent1.subscribe(topics.ALL) as everything,
+        ):
+            assert isinstance(agent1, MqttBus)
+            agent1.identity = None  # let it try another vehicle's topic
+            await agent1.publish(topics.status(0), status("agent-0", 0), qos=1)
+            await agent1.publish(topics.status(1), status("agent-1", 1), qos=1)
+            async with asyncio.timeout(WAIT_S):
+                assert await anext(everything) == (topics.status(1), status("agent-1", 1))
+            await asyncio.sleep(0.2)
+            assert everything.pending() == 0
+            assert agent1.stats.denied == 1
+        with pytest.raises(BusError, match=r"cannot connect|refused"):
+            async with open_bus(broker.url, connect_timeout_s=1.0, tls_context=tls_context(ca[0])):
+                pass
+    finally:
+        broker.stop()
