@@ -149,13 +149,16 @@ def describe_plan(
             f"vehicles: external, on {', '.join(urls)} (one MAVSDK hub; each vehicle is found "
             "by its system id on any of them)"
         )
+    # vehicles as users see them: numbered from 1, as their system ids; the index is what
+    # `standoff agent --vehicle I` takes
     lines.append(
-        f"  {'index':>5}  {'system id':>9}  {'altitude':>8}" + ("  URL" if builtin else "")
+        f"  {'vehicle (system id)':>19}  {'agent index':>11}  {'altitude':>8}"
+        + ("  URL" if builtin else "")
     )
     for i in range(plan.count):
         url = f"  udpin://127.0.0.1:{port + i}" if builtin else ""
         altitude = cfg.link.vehicle_altitude_m(i)
-        lines.append(f"  {i:>5}  {i + 1:>9}  {altitude:>6g} m{url}")
+        lines.append(f"  {i + 1:>19}  {i:>11}  {altitude:>6g} m{url}")
     gcs = getattr(cfg.link, "gcs_forward", None)
     if gcs is not None:
         lines.append(f"ground station forward: {gcs or 'off'}")
