@@ -252,3 +252,13 @@ class MissionConfig(StrictModel):
                 f"turn at cruise speed (needs >= {1.05 * turn_m:.0f} m)"
             )
         return self
+
+    @model_validator(mode="after")
+    def _one_url_or_one_each(self) -> "MissionConfig":
+        n = len(self.link.connect)
+        if n not in (0, 1, self.vehicles):
+            raise ValueError(
+                f"link.connect lists {n} URLs for {self.vehicles} vehicles: give one URL "
+                "that carries them all or one per vehicle"
+            )
+        return self

@@ -46,3 +46,16 @@ def test_two_urls_for_three_vehicles_are_refused_before_anything_starts(tmp_path
     with pytest.raises(ConfigError, match="2 vehicle URLs for 3 vehicles"):
         Mission(plan, tmp_path, connect=urls)
     Mission(plan, tmp_path, connect=urls[:1])  # one URL carrying them all
+
+
+def test_a_config_with_two_urls_for_three_vehicles_is_refused() -> None:
+    from app.config import load_config
+    from app.config.mission import MissionConfig
+
+    config = load_config("test-short", MissionConfig)
+    data = config.model_dump()
+    data["link"]["connect"] = ["udpin://127.0.0.1:14540", "udpin://127.0.0.1:14541"]
+    with pytest.raises(ValidationError, match="2 URLs for 3 vehicles"):
+        MissionConfig.model_validate(data)
+    data["link"]["connect"] = data["link"]["connect"][:1]
+    assert MissionConfig.model_validate(data).link.connect == ["udpin://127.0.0.1:14540"]
