@@ -146,7 +146,7 @@ class LinkSettings(StrictModel):
     handover_timeout_s: Positive = 120.0
     clock_window_s: Positive = 10.0
     gcs_forward: str = "udpout:127.0.0.1:14550"
-    camera_component_id: Annotated[int, Field(ge=1, le=255)] = 100  # MAV_COMP_ID_CAMERA
+    camera_component_id: Annotated[int, Field(ge=2, le=255)] = 100  # MAV_COMP_ID_CAMERA
 
     @field_validator("gcs_forward")
     @classmethod
