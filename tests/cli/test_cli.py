@@ -105,7 +105,8 @@ def test_ground_and_agent_check_the_shared_options_like_fly(command, args, field
 
 
 def test_fly_options_override_the_config_and_keep_the_rest():
-    config = load_config("px4-sitl", MissionConfig)
+    # hil: no vehicle URLs, so that 2 vehicles is a valid team (px4-sitl lists 3 URLs)
+    config = load_config("hil", MissionConfig)
     args = argparse.Namespace(speedup=2.0, seed=7, base_port=15000, vehicles=2)
     got = with_overrides(config, args)
     assert (got.sim.speedup, got.sim.seed, got.sim.base_port, got.vehicles) == (2.0, 7, 15000, 2)
