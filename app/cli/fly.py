@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         config = on_the_simulator(config)
     plan = build_plan(config)
     if args.dry_run:  # standoff check's plan
-        from app.cli.check import describe_plan
+        from app.compose.plan_text import describe_plan
 
         print(
             describe_plan(plan, args.connect or (), args.broker, args.base_port, str(args.config))
