@@ -32,7 +32,10 @@ from typing import Any
 import pytest
 import pytest_asyncio
 
+from app.adapters.bus import MissionKey, MqttBus, open_bus
 from app.cli import main
+from app.runtime.ports import messages as bus
+from app.runtime.ports import topics
 from sitl.ports import find_free_udp_base_port
 from sitl.px4 import HOLD
 from sitl.vehicle import AUTOPILOT_COMPONENT
@@ -302,6 +305,61 @@ class TeamRun:
     ground: Standoff
     agents: list[Standoff]
     codes: list[int]
+    forged: int = 0  # messages an intruder logged in as agent-1 tried to publish
+    forged_denied: int = 0  # of which the broker refused
+
+
+EYE = tuple(tuple(float(i == j) for j in range(6)) for i in range(6))
+
+
+async def forge_as_agent_1(broker: Mosquitto, rounds: int = 5) -> tuple[int, int]:
+    """A second client logged in as agent-1, holding the team's key (an insider), tries to take
+    the mission over at 5 rounds a second: shutdown and hold on ``command/all`` claiming to be
+    the ground, vehicle 0's status 10,000 s ahead, the fused estimate 500 m off, the mission
+    back to standby. QoS 1, so that the broker says what it did; returns (sent, refused)."""
+    assert broker.team is not None
+    forgeries: list[tuple[topics.Topic, bus.Message]] = [
+        (topics.command(), bus.Command(sender="ground", t_s=50.0, command="shutdown")),
+        (topics.command(), bus.Command(sender="ground", t_s=50.0, command="hold")),
+        (
+            topics.status(0),
+            bus.VehicleStatus(
+                sender="agent-0",
+                t_s=10_000.0,
+                vehicle=0,
+                east_m=0.0,
+                north_m=0.0,
+                alt_m=100.0,
+                course_rad=0.0,
+                speed_m_s=14.0,
+                phase_rad=0.0,
+                stage="track",
+                link="ok",
+                healthy=True,
+            ),
+        ),
+        (
+            topics.GLOBAL_ESTIMATE,
+            bus.GlobalEstimate(sender="ground", t_s=50.0, x=(500.0,) * 6, P=EYE, beta={}),
+        ),
+        (
+            topics.MISSION,
+            bus.MissionState(
+                sender="ground", t_s=50.0, stage="standby", active=(0,), spacing_rad=math.tau
+            ),
+        ),
+    ]
+    key = MissionKey.load(broker.team.mission_key)
+    async with open_bus(
+        broker.url, client_id="intruder", login=broker.login("agent-1"), mission_key=key
+    ) as intruder:
+        assert isinstance(intruder, MqttBus)
+        intruder.identity = None  # no check of its own: it publishes what it likes
+        for _ in range(rounds):
+            for topic, message in forgeries:
+                await intruder.publish(topic, message, qos=1)
+            await asyncio.sleep(0.2)  # the attack's rate is the test's input
+        return rounds * len(forgeries), intruder.stats.denied
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
@@ -327,16 +385,19 @@ async def team_run(tmp_path_factory: pytest.TempPathFactory) -> TeamRun:
                 await wait_for_event(
                     out / f"events-agent-{i}.jsonl", 90.0, kind="agent_stage", stage="track"
                 )
+            forged, forged_denied = await forge_as_agent_1(mosquitto)
             await asyncio.to_thread(mosquitto.stop)
             await asyncio.sleep(OUTAGE_S)  # the outage itself: its length is the test's input
             await asyncio.to_thread(mosquitto.start, keep_port=True)
             assert await ground.finish(120.0) == 0, ground.transcript()
             codes = [await agent.finish(30.0) for agent in agents]
-    return TeamRun(out, ground, agents, codes)
+    return TeamRun(out, ground, agents, codes, forged, forged_denied)
 
 
 def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRun) -> None:
     out = team_run.out
+    # the intruder logged in as agent-1: the broker refused every one of its forgeries
+    assert team_run.forged == team_run.forged_denied == 25
     for i, (agent, code) in enumerate(zip(team_run.agents, team_run.codes, strict=True)):
         assert code == 0, agent.transcript()
         assert f"agent {i}: shutdown by the ground station" in agent.stdout()
@@ -358,6 +419,9 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         assert {"kind": "agent_stop", "vehicle": i + 1, "reason": "shutdown"}.items() <= (
             agent_events[-1].items()
         )
+        # the ground's own shutdown at the end, not the intruder's in mid-track
+        assert agent_events[-1]["t_s"] >= TEAM_END_S - 5.0
+        assert "hold" not in [e.get("command") for e in agent_events]
 
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is False
