@@ -124,5 +124,7 @@ def test_the_cameras_component_id_is_the_mission_files():
     assert sim_config(plan, 20000).camera_component_id == 154
     assert link_config(plan, builtin=True).camera_component_id == 154
     v = vehicle("px4", camera_component_id=154)
-    component, msg = v.tracking_message(Observation(1.0, 2.0, 3.0, 1.0, 50.0, False, 2.0, 3.0), *GEO)
+    component, msg = v.tracking_message(
+        Observation(1.0, 2.0, 3.0, 1.0, 50.0, False, 2.0, 3.0), *GEO
+    )
     assert (component, msg.get_type()) == (154, "CAMERA_TRACKING_GEO_STATUS")
