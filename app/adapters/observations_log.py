@@ -5,8 +5,8 @@ One JSON object a line, in the order the mission's loops consumed them (``InputR
 - ``{"kind": "header", "schema": 1, "vehicles": n, "truth": true, "role": "mission"}``: first
   line; ``truth`` says whether the run scored its figures against the scripted target (the
   built-in simulator or simulated observations) or about the estimate; ``role`` who wrote it:
-  ``mission`` (``standoff fly``: everything, one file), ``ground`` or ``agent-<i>`` (the
-  processes of ``standoff ground`` / ``standoff agent``, each its own
+  ``mission`` (``standoff fly``: everything, one file), ``ground`` or ``agent-<N>`` (N = i + 1;
+  the processes of ``standoff ground`` / ``standoff agent``, each its own
   ``observations-<role>.jsonl``);
 - ``{"kind": "observation", "vehicle": i, "t_s", "east_m", "north_m", "sigma_m", "clock_t_s"}``:
   a target fix as agent ``i`` fed it to its local filter, before estimation (the camera's,

@@ -1,7 +1,7 @@
 """How ``standoff ground`` / ``standoff agent`` log in to the broker: options and the config's
 ``[bus]`` keys made into the bus's ``login`` and TLS context (docs/bus.md, "Logins").
 
-The login is always the process's identity (``ground``, ``agent-I``): a URL naming another user
+The login is always the process's identity (``ground``, ``agent-N``): a URL naming another user
 is refused. The password is read from a file or an environment variable, never taken from the
 command line alone (a ``mqtt://user:password@`` URL still works, but shows in ``ps``)."""
 
@@ -18,7 +18,7 @@ def add_login_options(p: argparse.ArgumentParser) -> None:
     """--password-file, --password-env, --ca-file, --cert-file, --key-file."""
     g = p.add_argument_group(
         "broker login",
-        "the login is this process's identity (ground, agent-I); {client} in a path stands "
+        "the login is this process's identity (ground, agent-N); {client} in a path stands "
         "for it; default: the config's [bus] keys",
     )
     g.add_argument(

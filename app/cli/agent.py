@@ -1,4 +1,4 @@
-"""``standoff agent --vehicle I [CONFIG] --broker URL``: one vehicle's agent as its own process."""
+"""``standoff agent --vehicle N [CONFIG] --broker URL``: one vehicle's agent as its own process."""
 
 import argparse
 import sys
@@ -20,15 +20,15 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
             "its agent (local estimator, guidance, phase keeping) with the ground station and "
             "the other agents over an MQTT broker. Stops when the ground station sends "
             "'shutdown', or on SIGINT/SIGTERM; either way the vehicle is left in hold. Writes "
-            "vehicle-<I+1>.tlog, events-agent-<I>.jsonl and agent-<I>.json to --out."
+            "vehicle-<N>.tlog, events-agent-<N>.jsonl and agent-<N>.json to --out."
         ),
     )
     p.add_argument(
         "--vehicle",
         type=int,
         required=True,
-        metavar="I",
-        help="which vehicle, 0-based (MAVLink system id I+1)",
+        metavar="N",
+        help="which vehicle, 1..<vehicles> (its MAVLink system id, as in vehicle-N.tlog)",
     )
     add_mission_options(p, "MQTT broker, mqtt[s]://host:port (default: the config's 'bus')")
     add_login_options(p)
@@ -37,13 +37,13 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         metavar="URL",
         help=(
             "the vehicle's MAVSDK URL (udpin://, udpout://, tcp://, serial://); default: the "
-            "config's URL for this vehicle, else the built-in simulator's port base-port + I"
+            "config's URL for this vehicle, else the built-in simulator's port base-port + N - 1"
         ),
     )
     p.add_argument(
         "--out",
         type=Path,
-        help="folder for the tlog and logs (default: runs/<name>-agent-<I>); the ground's "
+        help="folder for the tlog and logs (default: runs/<name>-agent-<N>); the ground's "
         "run folder keeps a mission together",
     )
     p.set_defaults(handler=run)
@@ -59,15 +59,21 @@ def run(args: argparse.Namespace) -> int:
     from app.config import load_config
     from app.config.mission import MissionConfig
     from app.config.plan import build_plan
+    from app.errors import ConfigError
+    from app.runtime.ports import topics
 
     config = with_overrides(load_config(args.config, MissionConfig), args)
     url = broker_url(args, config)
     plan = build_plan(config)
-    vehicle: int = args.vehicle
+    number: int = args.vehicle  # as users read it: the system id, agent-N, vehicle-N.tlog
+    if not 1 <= number <= plan.count:
+        raise ConfigError(f"--vehicle {number}: the mission's vehicles are 1..{plan.count}")
+    vehicle = number - 1  # the 0-based index inside
     connect = validate_url(agent_url(plan, vehicle, args.connect, config.sim.base_port))
     builtin = args.connect is None and not config.link.connect
-    options = bus_options(args, config, f"agent-{vehicle}")
-    out = args.out or Path("runs") / f"{config.name}-agent-{vehicle}"
+    name = topics.agent(vehicle)
+    options = bus_options(args, config, name)
+    out = args.out or Path("runs") / f"{config.name}-{name}"
 
     def notify(line: str) -> None:
         print(f"standoff agent: {line}", flush=True)
@@ -84,15 +90,15 @@ def run(args: argparse.Namespace) -> int:
             bus_options=options,
         )
     )
-    where = f"vehicle {vehicle + 1} {'in hold' if result.held else 'hold not confirmed'}"
+    where = f"vehicle {number} {'in hold' if result.held else 'hold not confirmed'}"
     if result.stopped_by is not None:
-        notify(f"agent {vehicle}: stopped by {result.stopped_by.name}; {where}")
+        notify(f"agent {number}: stopped by {result.stopped_by.name}; {where}")
         return 128 + int(result.stopped_by)
     if result.reason != "shutdown":
         print(
-            f"standoff agent: error: agent {vehicle}: {result.reason}; {where}",
+            f"standoff agent: error: agent {number}: {result.reason}; {where}",
             file=sys.stderr,
         )
         return 1
-    notify(f"agent {vehicle}: shutdown by the ground station; {where}")
+    notify(f"agent {number}: shutdown by the ground station; {where}")
     return 0

@@ -12,7 +12,7 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         help="write a mosquitto configuration for a team: logins, passwords, per-client ACL",
         description=(
             "Write the files a mosquitto broker needs so that each process of a multi-process "
-            "mission logs in as its identity (ground, agent-0 .. agent-<N-1>, and a read-only "
+            "mission logs in as its identity (ground, agent-1 .. agent-<N>, and a read-only "
             "observer) and may publish only on its own topics: mosquitto.conf (no anonymous "
             "clients), acl, passwd (hashed) and secrets/<login>.password (0600), one per "
             "process, to pass as --password-file (or [bus] password_file = "

@@ -18,10 +18,11 @@ def register(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") 
         description=(
             "Run the ground station of a mission as its own process: it takes the target "
             "observations, fuses the agents' estimates, decides the stage and publishes it over "
-            "an MQTT broker, where one 'standoff agent --vehicle I' per vehicle flies. When the "
-            "mission ends it sends 'shutdown' to every agent (they put their vehicles in hold "
-            "and exit) and writes the run folder. With --sitl it also runs the built-in "
-            "simulator for the mission; otherwise the vehicles are elsewhere."
+            "an MQTT broker, where one 'standoff agent --vehicle N' per vehicle (N = 1..n, its "
+            "MAVLink system id) flies. When the mission ends it sends 'shutdown' to every "
+            "agent (they put their vehicles in hold and exit) and writes the run folder. With "
+            "--sitl it also runs the built-in simulator for the mission; otherwise the vehicles "
+            "are elsewhere."
         ),
     )
     add_mission_options(p, "MQTT broker, mqtt[s]://host:port (default: the config's 'bus')")

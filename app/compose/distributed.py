@@ -3,10 +3,11 @@
 ``run_ground`` is the ground-station process (``standoff ground``): its bus client ``ground``,
 optionally the built-in simulator beside it, the ``GroundStation`` until mission time reaches the
 end, then a ``shutdown`` command to every agent and the run folder (summary, track, plots, the
-ground's events). ``run_agent`` is one vehicle's process (``standoff agent --vehicle I``): its
-bus client ``agent-I`` (last will: ``LinkState(online=False)``), a MAVSDK link to that vehicle
-alone, the same ``prepare_vehicle`` and ``VehicleAgent`` that ``standoff fly`` runs, its own
-``vehicle-{I+1}.tlog``, ``events-agent-I.jsonl`` and ``agent-I.json``. An agent stops on the
+ground's events). ``run_agent`` is one vehicle's process (``standoff agent --vehicle N``): its
+bus client ``agent-N`` (N: the vehicle's MAVLink system id, its index + 1; last will:
+``LinkState(online=False)``), a MAVSDK link to that vehicle alone, the same ``prepare_vehicle``
+and ``VehicleAgent`` that ``standoff fly`` runs, its own ``vehicle-N.tlog``,
+``events-agent-N.jsonl`` and ``agent-N.json``. An agent stops on the
 ground's ``shutdown`` or on SIGINT/SIGTERM; either way it stops commanding its vehicle and puts it
 in hold at once (the link tries again as it closes if that was refused), then unwinds and says
 ``LinkState(online=False)`` before leaving the bus. A second signal to either process stops it at
@@ -396,7 +397,7 @@ async def run_ground(
 
 
 def agent_files(out_dir: Path, count: int) -> dict[int, dict[str, Any]]:
-    """The counters (``link``, ``agent``, ``bus``) each agent wrote to ``agent-I.json`` in
+    """The counters (``link``, ``agent``, ``bus``) each agent wrote to ``agent-N.json`` in
     ``out_dir`` as it stopped (before it went offline), by vehicle index: the agents that share
     the ground's run folder. A file missing (an agent elsewhere, or still running) or unreadable
     is left out, the latter with a warning."""
@@ -705,7 +706,7 @@ class _Flight:
                 await link.hold()
         except (LinkError, TimeoutError) as exc:
             detail = str(exc) or f"no answer within {HOLD_TIMEOUT_S:.0f} s"
-            log.error("agent %d: vehicle %d did not take the hold: %s", i, i + 1, detail)
+            log.error("agent %d: vehicle %d did not take the hold: %s", i + 1, i + 1, detail)
             self._events.emit("hold_refused", self.last_t_s, vehicle=i, reason=detail)
             return False
         self._events.emit("hold", self.last_t_s, vehicle=i, reason=reason)
@@ -721,7 +722,7 @@ class _Flight:
 
     async def fly(self, url: str, out_dir: Path, builtin: bool) -> None:
         plan, i = self._plan, self._vehicle
-        self._notify(f"agent {i}: waiting for vehicle {i + 1} on {url}")
+        self._notify(f"agent {i + 1}: waiting for vehicle {i + 1} on {url}")
         mission_clock = DeferredMissionClock()
         async with AsyncExitStack() as stack:
             links = await stack.enter_async_context(
@@ -736,7 +737,7 @@ class _Flight:
                 )
             )
             link = self._link = links[i]
-            self._notify(f"agent {i}: waiting for the ground station's mission epoch")
+            self._notify(f"agent {i + 1}: waiting for the ground station's mission epoch")
             epoch = await wait_for_epoch(self._epochs, self._clock)
             mission_clock.set(epoch)
             await _next_frame(link, plan.config.link.connect_timeout_s)  # on the mission clock
@@ -744,7 +745,9 @@ class _Flight:
                 "mission_epoch", epoch.now_s(), vehicle=i, epoch_s=epoch.epoch_s, rate=epoch.rate
             )
             await prepare_vehicle(link, bring_up(plan, i), self._events)
-            self._notify(f"agent {i}: vehicle {i + 1} under offboard control")
-            recorder = stack.enter_context(recording_inputs(plan, out_dir, builtin, f"agent-{i}"))
+            self._notify(f"agent {i + 1}: vehicle {i + 1} under offboard control")
+            recorder = stack.enter_context(
+                recording_inputs(plan, out_dir, builtin, topics.agent(i))
+            )
             self._agent = vehicle_agent(plan, i, link, self._bus, self._events, builtin, recorder)
             await self._agent.run()

@@ -208,7 +208,7 @@ class Mission:
         )
         agents = []
         for i, link in self.links.items():
-            name = f"agent-{i}"
+            name = topics.agent(i)
             will = Will(topics.link(i), LinkState(sender=name, t_s=0.0, online=False, vehicle=i))
             bus = await client(name, will)
             agents.append(vehicle_agent(plan, i, link, bus, events, self.builtin, recorder))

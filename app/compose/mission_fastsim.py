@@ -39,6 +39,7 @@ from app.core.plant import FixedWingState, VehicleEnvelope
 from app.report.summary import summarize
 from app.runtime import wire
 from app.runtime.fastsim import Commands, fly_team
+from app.runtime.ports import topics
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,7 +115,7 @@ def _fix(status: logic.AgentStatus) -> logic.TeammateFix:
 
 def _bus_local(estimate: LocalEstimate, vehicle: int) -> LocalEstimate:
     """What the ground station receives over the bus: the live mission's own conversion."""
-    return wire.local_to_core(wire.local_to_bus(estimate, vehicle, f"agent-{vehicle}"))
+    return wire.local_to_core(wire.local_to_bus(estimate, vehicle, topics.agent(vehicle)))
 
 
 def _bus_global(estimate: GlobalEstimate) -> GlobalEstimate:

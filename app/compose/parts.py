@@ -232,7 +232,7 @@ def recording_inputs(
 ) -> ObservationLog:
     """The run folder's ``config.json`` (the resolved mission file; by the whole mission or the
     ground) and the recorder (to enter) of what ``standoff replay`` re-runs: ``role`` is
-    ``mission`` (``observations.jsonl``), ``ground`` or ``agent-<i>`` (each its own file)."""
+    ``mission`` (``observations.jsonl``), ``ground`` or ``agent-<N>`` (each its own file)."""
     agent = role.startswith("agent")
     if not agent:
         write_run_config(out_dir, plan.config)
@@ -304,7 +304,7 @@ def write_outputs(
     """The run folder (``write_run_folder``) from what the ground recorded and the parts
     counted. ``run``: how the run was made (``app.report.provenance.run_block``); ``remote``:
     per vehicle, the ``link`` and ``agent`` counters of agents in other processes (their
-    ``agent-I.json``), merged in beside this process's own. Vehicles are keyed from 1."""
+    ``agent-N.json``), merged in beside this process's own. Vehicles are keyed from 1."""
     remote = remote or {}
     link_counters = {i: c for i, link in links.items() if (c := counters_of(link)) is not None}
     agent_counters = {a.params.vehicle: dataclasses.asdict(a.counters) for a in agents}

@@ -5,6 +5,7 @@ parameters each autopilot adapter reads and sets before take-off. Builds nothing
 nothing."""
 
 from app.config.plan import MissionPlan
+from app.runtime.ports import topics
 
 
 def _adapter_parameters(name: str, plan: MissionPlan, builtin: bool) -> list[str]:
@@ -92,16 +93,17 @@ def describe_plan(
             f"vehicles: external, on {', '.join(urls)} (one MAVSDK hub; each vehicle is found "
             "by its system id on any of them)"
         )
-    # vehicles as users see them: numbered from 1, as their system ids; the index is what
-    # `standoff agent --vehicle I` takes
+    # vehicles as users see them: numbered from 1, as their system ids, their agents' bus
+    # logins and what `standoff agent --vehicle N` takes
     lines.append(
-        f"  {'vehicle (system id)':>19}  {'agent index':>11}  {'altitude':>8}"
+        f"  {'vehicle (system id)':>19}  {'agent login':>11}  {'--vehicle':>9}  {'altitude':>8}"
         + ("  URL" if builtin else "")
     )
     for i in range(plan.count):
         url = f"  udpin://127.0.0.1:{port + i}" if builtin else ""
         altitude = cfg.link.vehicle_altitude_m(i)
-        lines.append(f"  {i + 1:>19}  {i:>11}  {altitude:>6g} m{url}")
+        login = topics.agent(i)
+        lines.append(f"  {i + 1:>19}  {login:>11}  {i + 1:>9}  {altitude:>6g} m{url}")
     gcs = getattr(cfg.link, "gcs_forward", None)
     if gcs is not None:
         lines.append(f"ground station forward: {gcs or 'off'}")

@@ -181,7 +181,7 @@ class SimSettings(StrictModel):
 class BusLoginConfig(StrictModel):
     """How each process of a multi-process mission logs in to the broker: the ``[bus]`` table's
     keys beside ``url`` (``bus = "mqtt://..."`` alone is the URL). The login is the process's
-    identity (``ground``, ``agent-0``, ...); ``{client}`` in a path stands for it, so one file
+    identity (``ground``, ``agent-1``, ...); ``{client}`` in a path stands for it, so one file
     serves the whole team (``password_file = "secrets/{client}.password"``, as ``standoff
     broker`` writes them). Relative paths are from the working directory. The password comes
     from ``password_file`` (its first line) or the environment variable ``password_env``; TLS

@@ -35,6 +35,7 @@ from app.report.summary import summarize
 from app.runtime import wire
 from app.runtime.agent import AgentRuntimeParams
 from app.runtime.ground import GroundRuntimeParams
+from app.runtime.ports import topics
 
 OBSERVATIONS_SCHEMA = 1
 KINDS = ("observation", "fused", "status", "local")
@@ -252,7 +253,7 @@ class _Replay:
             obs = agent_logic.Observed(_observation(record, params.sensor))
             self.states[v], out = agent_logic.step(self.states[v], obs, params)
             if out.estimate is not None:
-                sent = wire.local_to_bus(out.estimate, v, f"agent-{v}")
+                sent = wire.local_to_bus(out.estimate, v, topics.agent(v))
                 self.locals[(v, sent.t_s)] = wire.local_to_core(sent)
         else:
             estimate = self.fused.get(float(record["t_s"]))

@@ -187,7 +187,7 @@ class VehicleAgent:
                 honours_speed=link.honours_speed,
             )
         self.params = params
-        self.name = f"agent-{params.vehicle}"
+        self.name = topics.agent(params.vehicle)
         self.state = logic.initial_agent_state(
             params, runtime.estimate_period_s, runtime.status_period_s
         )

@@ -2,10 +2,11 @@
 client publish only on its own topics (docs/bus.md, "A broker that checks who publishes").
 
 The ACL grants what ``topics.binding`` permits, one ``user`` block per identity: the ground
-station (``ground``), one agent per vehicle (``agent-{i}``, i the 0-based index in the topics)
-and a read-only ``observer`` (a live view, a recorder). Everyone may read the mission's topics.
-mosquitto's ``pattern`` lines cannot express it: their ``%u`` is the whole login, and the topics
-name a vehicle by its bare index, so the blocks are written out for a team of n.
+station (``ground``), one agent per vehicle (``agent-N``, N its MAVLink system id; its topics
+name the vehicle by its 0-based index N - 1) and a read-only ``observer`` (a live view, a
+recorder). Everyone may read the mission's topics. mosquitto's ``pattern`` lines cannot express
+it: their ``%u`` is the whole login, and the topics name a vehicle by its bare index, so the
+blocks are written out for a team of n.
 
 The password file uses mosquitto 2's own hash (``$7$``: PBKDF2-HMAC-SHA512, 101 iterations,
 12-byte salt), so ``mosquitto_passwd`` is not needed where the files are made.
@@ -85,7 +86,7 @@ def conf_text(directory: Path, *, port: int = DEFAULT_PORT, host: str | None = N
     listener = f"listener {port}" + (f" {host}" if host else "")
     return (
         "# mosquitto for a standoff mission: no anonymous clients; each client logs in as its\n"
-        "# identity (ground, agent-0, ...) and may publish only on its own topics (docs/bus.md).\n"
+        "# identity (ground, agent-1, ...) and may publish only on its own topics (docs/bus.md).\n"
         "# Written by 'standoff broker'. For TLS add a listener such as:\n"
         "#   listener 8883\n"
         "#   cafile /etc/mosquitto/standoff/ca.crt\n"

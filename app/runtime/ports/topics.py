@@ -147,7 +147,8 @@ ALL_COMMANDS = TopicFilter(f"{ROOT}/command/+")
 # --- who may publish what where: identity bound to topics (docs/bus.md, "Identity") -----------
 #
 # Every client of a mission is one identity: the ground station ``ground`` and one agent per
-# vehicle, ``agent-{i}`` for the 0-based vehicle index i (the topics' own numbering). With a
+# vehicle, ``agent-{i+1}`` for the 0-based vehicle index i (the number users read: the MAVLink
+# system id, ``vehicle-{i+1}.tlog``; the topics keep the 0-based index internally). With a
 # broker that authenticates, the client's login is its identity. A message on one of the
 # layout's topics is believed only when its ``sender`` is an identity the topic permits, its
 # ``kind`` is the topic's and the vehicle it is about is the topic's vehicle; both buses check
@@ -161,10 +162,11 @@ COMMANDERS = frozenset({GROUND, OPERATOR})
 
 
 def agent(vehicle: int) -> str:
-    """The identity (bus client name and broker login) of vehicle ``vehicle``'s agent."""
+    """The identity (bus client name and broker login) of the agent of the vehicle with 0-based
+    index ``vehicle``: ``agent-{vehicle + 1}``, numbered like its MAVLink system id."""
     if isinstance(vehicle, bool) or not isinstance(vehicle, int) or not 0 <= vehicle <= MAX_VEHICLE:
         raise TopicError(f"vehicle index must be an int in 0..{MAX_VEHICLE}, got {vehicle!r}")
-    return f"{AGENT_PREFIX}{vehicle}"
+    return f"{AGENT_PREFIX}{vehicle + 1}"
 
 
 def _index(text: str) -> int | None:
@@ -176,10 +178,15 @@ def _index(text: str) -> int | None:
 
 
 def vehicle_of(identity: str) -> int | None:
-    """The vehicle an agent's identity flies (``agent-2`` -> 2); None for any other name."""
+    """The 0-based index of the vehicle an agent's identity flies (``agent-1`` -> 0); None for
+    any other name (``agent-0``, ``agent-01``, ``ground``)."""
     if not identity.startswith(AGENT_PREFIX):
         return None
-    return _index(identity[len(AGENT_PREFIX) :])
+    text = identity[len(AGENT_PREFIX) :]
+    if text == "0" or not text.isascii() or not text.isdigit() or text[0] == "0":
+        return None
+    number = int(text)
+    return number - 1 if number <= MAX_VEHICLE + 1 else None
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -248,7 +255,7 @@ _NOBODY = Binding("", frozenset())
 # why a received message was not believed (``Bus.drops`` counts each)
 UNKNOWN_TOPIC = "unknown_topic"  # inside the layout's root, but not one of its topics
 WRONG_KIND = "wrong_kind"  # e.g. a status on the mission topic
-WRONG_SENDER = "wrong_sender"  # a sender the topic does not permit (agent-1 on status/0)
+WRONG_SENDER = "wrong_sender"  # a sender the topic does not permit (agent-2 on status/0)
 WRONG_VEHICLE = "wrong_vehicle"  # about another vehicle than the topic's (status/1 for vehicle 0)
 REFUSALS = (UNKNOWN_TOPIC, WRONG_KIND, WRONG_SENDER, WRONG_VEHICLE)
 
