@@ -8,7 +8,7 @@ built-in simulator, composed in this process (``Mission``) with its bus on a mos
 on a free loopback port, once clean and once per attack. Each attack starts when the ground
 station enters the track stage and sends its messages at ``--rate`` per second (default 5) for
 ``--seconds`` of wall time (default 10) from its own MQTT client (``intruder``), stamped from
-the ground's mission time: forged statuses far in the future (sender agent-0 on vehicle 0's own
+the ground's mission time: forged statuses far in the future (sender agent-1 on vehicle 0's own
 topic, so that the identity rule lets them through and the time window must refuse them),
 forged ``estimate.global`` and ``estimate.local`` placing the target 500 m away, observations
 stamped 1e5 s ahead, ``command/all`` hold claiming to be the ground, ``t_s`` 1e308 statuses and
@@ -83,7 +83,7 @@ Send = Callable[[Context, int], Awaitable[None]]
 
 def _status(t: float, **change: Any) -> bus.VehicleStatus:
     values: dict[str, Any] = {
-        "sender": "agent-0", "t_s": t, "vehicle": 0, "east_m": 0.0, "north_m": 90.0,
+        "sender": "agent-1", "t_s": t, "vehicle": 0, "east_m": 0.0, "north_m": 90.0,
         "alt_m": 100.0, "course_rad": 0.0, "speed_m_s": 14.0, "phase_rad": 0.0,
         "stage": "track", "link": "ok", "healthy": True,
     }  # fmt: skip
@@ -119,7 +119,7 @@ async def global_1e200(ctx: Context, _k: int) -> None:
 
 async def local_500m(ctx: Context, _k: int) -> None:
     message = bus.LocalEstimate(
-        sender="agent-0", t_s=ctx.now(), vehicle=0, x=_estimate_x(ctx, 500.0), P=EYE
+        sender="agent-1", t_s=ctx.now(), vehicle=0, x=_estimate_x(ctx, 500.0), P=EYE
     )
     await ctx.intruder.publish(topics.local_estimate(0), message)
 
@@ -127,7 +127,7 @@ async def local_500m(ctx: Context, _k: int) -> None:
 async def local_one_model(ctx: Context, _k: int) -> None:
     x = _estimate_x(ctx, 0.0)
     message = bus.LocalEstimate(
-        sender="agent-0", t_s=ctx.now(), vehicle=0, x=x, P=EYE,
+        sender="agent-1", t_s=ctx.now(), vehicle=0, x=x, P=EYE,
         mu=(1.0,), model_x=(x,), model_P=(EYE,),
     )  # fmt: skip
     await ctx.intruder.publish(topics.local_estimate(0), message)
@@ -169,7 +169,7 @@ async def nesting_bomb(ctx: Context, _k: int) -> None:
 async def garbage_flood(ctx: Context, k: int) -> None:
     rng = random.Random(k)
     numbers = json.dumps([rng.random() for _ in range(5000)]).encode()  # ~100 KB
-    payload = b'{"v":2,"kind":"status","sender":"agent-0","x":' + numbers + b"}"
+    payload = b'{"v":2,"kind":"status","sender":"agent-1","x":' + numbers + b"}"
     for topic in (topics.status(0), topics.GLOBAL_ESTIMATE, topics.observation(1)):
         await asyncio.to_thread(_raw, ctx, topic, payload)
 
@@ -195,9 +195,9 @@ async def fake_fixes(ctx: Context, _k: int) -> None:
 
 ATTACKS: dict[str, tuple[str, Send, float]] = {
     # name: (what is sent, how, sends per second: 0 = the --rate)
-    "status-far-future": ("status of vehicle 0 as agent-0, t_s +10,000 s", far_future_status, 0),
+    "status-far-future": ("status of vehicle 0 as agent-1, t_s +10,000 s", far_future_status, 0),
     "estimate-global-500m": ("estimate.global from 'ground', target 500 m off", global_500m, 0),
-    "estimate-local-500m": ("estimate.local from 'agent-0', target 500 m off", local_500m, 0),
+    "estimate-local-500m": ("estimate.local from 'agent-1', target 500 m off", local_500m, 0),
     "observation-future": ("observation for vehicle 0, t_s +1e5 s", future_observation, 0),
     "command-hold": ("command/all hold with sender 'ground' from 'intruder'", command_hold, 0),
     "status-1e308": ("status for vehicle 0, t_s 1e308", status_1e308, 0),

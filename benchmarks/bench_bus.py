@@ -22,7 +22,7 @@ from app.runtime.ports.messages import VehicleStatus
 
 def _status(i: int) -> VehicleStatus:
     return VehicleStatus(
-        sender="agent-0", t_s=i * 0.1, vehicle=0, east_m=10.0 + i, north_m=-20.0, alt_m=100.0,
+        sender="agent-1", t_s=i * 0.1, vehicle=0, east_m=10.0 + i, north_m=-20.0, alt_m=100.0,
         course_rad=1.0, speed_m_s=14.0, phase_rad=0.5, stage="track", link="ok", healthy=True,
     )  # fmt: skip
 

@@ -90,7 +90,9 @@ async def multi_process(config_name: str, out: Path, broker: str) -> dict[str, A
         for i in range(n):
             agents.append(
                 await stack.enter_async_context(
-                    standoff("agent", "--vehicle", str(i), *common, log=out / f"agent-{i}.err")
+                    standoff(
+                        "agent", "--vehicle", str(i + 1), *common, log=out / f"agent-{i + 1}.err"
+                    )
                 )
             )
         for i, agent in enumerate(agents):

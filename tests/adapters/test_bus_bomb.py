@@ -33,7 +33,7 @@ async def test_a_retained_nesting_bomb_on_every_topic_keeps_every_client_on_the_
             str(topic), BOMB, retain=True, hostname="127.0.0.1", port=mosquitto.port
         )
     async with (
-        MqttBus(mosquitto.url, client_id="agent-0") as agent,
+        MqttBus(mosquitto.url, client_id="agent-1") as agent,
         MqttBus(mosquitto.url, client_id="ground") as ground,
         agent.subscribe(topics.ALL) as heard,
     ):

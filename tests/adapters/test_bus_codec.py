@@ -114,7 +114,7 @@ def test_the_strategy_covers_every_message_type() -> None:
 
 
 OK = VehicleStatus(
-    sender="agent-0", t_s=1.0, vehicle=0, east_m=1.0, north_m=2.0, alt_m=3.0, course_rad=0.0,
+    sender="agent-1", t_s=1.0, vehicle=0, east_m=1.0, north_m=2.0, alt_m=3.0, course_rad=0.0,
     speed_m_s=14.0, phase_rad=0.0, stage="track", link="ok", healthy=True,
 )  # fmt: skip
 
@@ -189,7 +189,7 @@ def test_estimates_are_built_from_numpy_arrays() -> None:
 
     x = np.arange(6.0)
     p = np.diag(np.arange(1.0, 7.0)) + 1e-12 * np.ones((6, 6))
-    local = LocalEstimate.from_arrays(sender="agent-0", t_s=0.5, vehicle=0, x=x, P=p)
+    local = LocalEstimate.from_arrays(sender="agent-1", t_s=0.5, vehicle=0, x=x, P=p)
     assert local.x == (0.0, 1.0, 2.0, 3.0, 4.0, 5.0)
     np.testing.assert_array_equal(np.array(local.P), p)
     fused = GlobalEstimate.from_arrays(
@@ -308,7 +308,7 @@ def test_brackets_inside_strings_do_not_count_as_nesting() -> None:
 def test_the_deepest_message_passes_the_depth_bound() -> None:
     eye = tuple(tuple(1.0 if i == j else 0.0 for j in range(6)) for i in range(6))
     message = LocalEstimate(
-        sender="agent-0", t_s=1.0, vehicle=0, x=(0.0,) * 6, P=eye,
+        sender="agent-1", t_s=1.0, vehicle=0, x=(0.0,) * 6, P=eye,
         mu=(0.5, 0.5), model_x=((0.0,) * 6, (0.0,) * 6), model_P=(eye, eye),
     )  # fmt: skip
     assert decode(encode(message)) == message

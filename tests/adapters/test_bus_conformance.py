@@ -75,7 +75,7 @@ async def harness(request: pytest.FixtureRequest) -> AsyncIterator[Harness]:
 
 def status(vehicle: int = 0, t_s: float = 0.0) -> VehicleStatus:
     return VehicleStatus(
-        sender=f"agent-{vehicle}",
+        sender=f"agent-{vehicle + 1}",
         t_s=t_s,
         vehicle=vehicle,
         east_m=10.0,
@@ -106,7 +106,7 @@ EXAMPLES: list[tuple[Topic, Message]] = [
     (topics.observation(2), observation(3.5, vehicle=2)),
     (
         topics.local_estimate(1),
-        LocalEstimate(sender="agent-1", t_s=4.0, vehicle=1, x=(1, 2, 3, 4, 5, 6), P=EYE),
+        LocalEstimate(sender="agent-2", t_s=4.0, vehicle=1, x=(1, 2, 3, 4, 5, 6), P=EYE),
     ),
     (
         topics.GLOBAL_ESTIMATE,
@@ -119,7 +119,7 @@ EXAMPLES: list[tuple[Topic, Message]] = [
         MissionState(sender="ground", t_s=5.0, stage="track", active=(0, 2), spacing_rad=math.pi),
     ),
     (topics.status(0), status(0, 6.0)),
-    (topics.link(1), LinkState(sender="agent-1", t_s=0.0, online=False, vehicle=1)),
+    (topics.link(1), LinkState(sender="agent-2", t_s=0.0, online=False, vehicle=1)),
     (topics.command(), Command(sender="ground", t_s=7.0, command="hold")),
 ]
 
@@ -376,45 +376,45 @@ async def test_bad_topics_are_refused_before_anything_is_sent(harness: Harness) 
 
 
 async def test_will_is_published_when_a_client_exits_on_an_error(harness: Harness) -> None:
-    will = Will(topics.link(2), LinkState(sender="agent-2", t_s=0.0, online=False, vehicle=2))
+    will = Will(topics.link(2), LinkState(sender="agent-3", t_s=0.0, online=False, vehicle=2))
     async with harness.open() as watcher, watcher.subscribe(topics.ALL_LINKS) as links:
         with pytest.raises(RuntimeError, match="agent failed"):
-            async with harness.open(client_id="agent-2", will=will):
+            async with harness.open(client_id="agent-3", will=will):
                 raise RuntimeError("agent failed")
         assert await take(links, 1) == [(will.topic, will.message)]
 
 
 async def test_a_clean_close_does_not_publish_the_will(harness: Harness) -> None:
-    will = Will(topics.link(2), LinkState(sender="agent-2", t_s=0.0, online=False, vehicle=2))
+    will = Will(topics.link(2), LinkState(sender="agent-3", t_s=0.0, online=False, vehicle=2))
     async with harness.open() as watcher, watcher.subscribe(topics.ALL_LINKS) as links:
-        async with harness.open(client_id="agent-2", will=will):
+        async with harness.open(client_id="agent-3", will=will):
             pass
-        marker = LinkState(sender="agent-3", t_s=1.0, online=True, vehicle=3)
+        marker = LinkState(sender="agent-4", t_s=1.0, online=True, vehicle=3)
         await watcher.publish(topics.link(3), marker)
         assert await take(links, 1) == [(topics.link(3), marker)]
 
 
 async def test_a_retained_message_reaches_later_subscribers(harness: Harness) -> None:
-    first = LinkState(sender="agent-1", t_s=0.0, online=True, vehicle=1)
-    latest = LinkState(sender="agent-1", t_s=1.0, online=False, vehicle=1)
-    event = LinkState(sender="agent-2", t_s=2.0, online=True, vehicle=2)
+    first = LinkState(sender="agent-2", t_s=0.0, online=True, vehicle=1)
+    latest = LinkState(sender="agent-2", t_s=1.0, online=False, vehicle=1)
+    event = LinkState(sender="agent-3", t_s=2.0, online=True, vehicle=2)
     async with harness.open() as pub:  # QoS 1: each is with the broker once publish returns
         await pub.publish(topics.link(1), first, qos=1, retain=True)
         await pub.publish(topics.link(1), latest, qos=1, retain=True)
         await pub.publish(topics.link(2), event, qos=1)  # not retained: gone for later ones
         async with harness.open() as late, late.subscribe(topics.ALL_LINKS) as links:
             assert await take(links, 1) == [(topics.link(1), latest)]
-            marker = LinkState(sender="agent-3", t_s=3.0, online=True, vehicle=3)
+            marker = LinkState(sender="agent-4", t_s=3.0, online=True, vehicle=3)
             await pub.publish(topics.link(3), marker)
             assert await take(links, 1) == [(topics.link(3), marker)]
 
 
 async def test_the_birth_is_published_as_the_client_opens(harness: Harness) -> None:
-    birth = Birth(topics.link(2), LinkState(sender="agent-2", t_s=0.0, online=True, vehicle=2))
+    birth = Birth(topics.link(2), LinkState(sender="agent-3", t_s=0.0, online=True, vehicle=2))
     async with (
         harness.open() as watcher,
         watcher.subscribe(topics.ALL_LINKS) as links,
-        harness.open(client_id="agent-2", birth=birth) as agent,
+        harness.open(client_id="agent-3", birth=birth) as agent,
     ):
         assert await take(links, 1) == [(birth.topic, birth.message)]
         assert agent.stats.published == 1

@@ -110,46 +110,50 @@ def epoch(sender: str) -> MissionEpoch:
 
 # (topic, message, why it is refused or None)
 RULE_CASES: list[tuple[Topic | str, Message, str | None]] = [
-    (topics.status(0), status("agent-0", 0), None),
-    (topics.status(0), status("agent-1", 0), "wrong_sender"),  # agent-1 speaking for vehicle 0
-    (topics.status(1), status("agent-1", 0), "wrong_vehicle"),  # a status about another vehicle
+    (topics.status(0), status("agent-1", 0), None),
+    (
+        topics.status(0),
+        status("agent-2", 0),
+        "wrong_sender",
+    ),  # agent-2 speaking for agent-1's vehicle
+    (topics.status(1), status("agent-2", 0), "wrong_vehicle"),  # a status about another vehicle
     (topics.status(0), status("ground", 0), "wrong_sender"),
     (topics.status(0), mission("ground"), "wrong_kind"),
-    (topics.local_estimate(2), local("agent-2", 2), None),
-    (topics.local_estimate(2), local("agent-0", 0), "wrong_sender"),
-    (topics.local_estimate(2), local("agent-2", 0), "wrong_vehicle"),
+    (topics.local_estimate(2), local("agent-3", 2), None),
+    (topics.local_estimate(2), local("agent-1", 0), "wrong_sender"),
+    (topics.local_estimate(2), local("agent-3", 0), "wrong_vehicle"),
     (topics.local_estimate(0), local("ground", 0), "wrong_sender"),
     (topics.observation(2), observation("ground", 2), None),
-    (topics.observation(2), observation("agent-2", 2), None),
-    (topics.observation(2), observation("agent-1", 2), "wrong_sender"),
+    (topics.observation(2), observation("agent-3", 2), None),
+    (topics.observation(2), observation("agent-2", 2), "wrong_sender"),
     (topics.observation(2), observation("ground", 1), "wrong_vehicle"),
     (topics.observation(2), observation("ground", None), "wrong_vehicle"),
     (topics.observation(0), observation("tracker", 0), "wrong_sender"),
     (topics.GLOBAL_ESTIMATE, fused("ground"), None),
-    (topics.GLOBAL_ESTIMATE, fused("agent-0"), "wrong_sender"),
+    (topics.GLOBAL_ESTIMATE, fused("agent-1"), "wrong_sender"),
     (topics.MISSION, mission("ground"), None),
-    (topics.MISSION, mission("agent-1"), "wrong_sender"),
+    (topics.MISSION, mission("agent-2"), "wrong_sender"),
     (topics.MISSION_EPOCH, epoch("ground"), None),
-    (topics.MISSION_EPOCH, epoch("agent-1"), "wrong_sender"),
+    (topics.MISSION_EPOCH, epoch("agent-2"), "wrong_sender"),
     (topics.command(), command("ground"), None),
     (topics.command(), command("operator"), None),  # standoff fly's operator console
-    (topics.command(), command("agent-1"), "wrong_sender"),
+    (topics.command(), command("agent-2"), "wrong_sender"),
     (topics.command(1), command("ground", (1,)), None),
     (topics.command(1), command("ground"), "wrong_vehicle"),  # on command/1, for everyone
     (topics.command(1), command("ground", (0,)), "wrong_vehicle"),
-    (topics.command(1), command("agent-1", (1,)), "wrong_sender"),
-    (topics.link(1), presence("agent-1", 1), None),
-    (topics.link(1), presence("agent-1", None), "wrong_vehicle"),
-    (topics.link(1), presence("agent-0", 1), "wrong_sender"),
+    (topics.command(1), command("agent-2", (1,)), "wrong_sender"),
+    (topics.link(1), presence("agent-2", 1), None),
+    (topics.link(1), presence("agent-2", None), "wrong_vehicle"),
+    (topics.link(1), presence("agent-1", 1), "wrong_sender"),
     (topics.link("ground"), presence("ground", None), None),
-    (topics.link("ground"), presence("agent-0", None), "wrong_sender"),
-    ("standoff/v1/status/01", status("agent-1", 1), "unknown_topic"),  # not canonical
-    ("standoff/v1/status/255", status("agent-1", 1), "unknown_topic"),  # no such vehicle
-    ("standoff/v1/status/ground", status("agent-1", 1), "unknown_topic"),
+    (topics.link("ground"), presence("agent-1", None), "wrong_sender"),
+    ("standoff/v1/status/01", status("agent-2", 1), "unknown_topic"),  # not canonical
+    ("standoff/v1/status/255", status("agent-2", 1), "unknown_topic"),  # no such vehicle
+    ("standoff/v1/status/ground", status("agent-2", 1), "unknown_topic"),
     ("standoff/v1/elsewhere", mission("ground"), "unknown_topic"),
     ("standoff/v1", mission("ground"), "unknown_topic"),
     ("tracker/fixes", observation("tracker", None), None),  # another program's topic
-    ("standoff/v2/mission", mission("agent-1"), None),  # another layout: not this mission's
+    ("standoff/v2/mission", mission("agent-2"), None),  # another layout: not this mission's
 ]
 
 
@@ -161,17 +165,34 @@ def test_the_rule_binds_sender_kind_and_vehicle_to_the_topic(
 
 
 def test_identities_and_their_vehicles() -> None:
-    assert topics.agent(0) == "agent-0"
-    assert topics.vehicle_of("agent-17") == 17
-    for name in ("ground", "agent-", "agent-01", "agent-255", "agent-x", "agent-+1", "agent-1.0"):
+    # numbered as users read them (the MAVLink system id): index i flies as agent-{i+1}
+    assert topics.agent(0) == "agent-1"
+    assert topics.agent(topics.MAX_VEHICLE) == "agent-255"
+    assert topics.vehicle_of("agent-1") == 0
+    assert topics.vehicle_of("agent-18") == 17
+    assert topics.vehicle_of("agent-255") == topics.MAX_VEHICLE
+    for i in range(topics.MAX_VEHICLE + 1):
+        assert topics.vehicle_of(topics.agent(i)) == i
+    bad = (
+        "ground",
+        "agent-",
+        "agent-0",
+        "agent-01",
+        "agent-256",
+        "agent-x",
+        "agent-+1",
+        "agent-1.0",
+    )
+    for name in bad:
         assert topics.vehicle_of(name) is None, name
-    with pytest.raises(topics.TopicError):
-        topics.agent(255)
-    assert topics.may_publish("agent-1", topics.status(1))
-    assert not topics.may_publish("agent-1", topics.status(0))
-    assert not topics.may_publish("agent-1", topics.command())
+    for index in (-1, 255, True):
+        with pytest.raises(topics.TopicError):
+            topics.agent(index)
+    assert topics.may_publish("agent-2", topics.status(1))
+    assert not topics.may_publish("agent-2", topics.status(0))
+    assert not topics.may_publish("agent-2", topics.command())
     assert topics.may_publish("ground", topics.command())
-    assert topics.may_publish("agent-1", "tracker/fixes")
+    assert topics.may_publish("agent-2", "tracker/fixes")
 
 
 # --- both buses ------------------------------------------------------------------------------
@@ -234,7 +255,7 @@ async def test_a_flood_of_forgeries_is_counted_in_full_and_logged_rarely(
     caplog.set_level(logging.WARNING, logger="app.adapters.bus.base")
     async with receiver.subscribe(topics.ALL_COMMANDS) as commands:
         for _ in range(120):
-            await pub.publish(topics.command(), command("agent-1"))  # shutdown, "from" agent-1
+            await pub.publish(topics.command(), command("agent-2"))  # shutdown, "from" agent-2
         await pub.publish(topics.command(), command("ground"))
         async with asyncio.timeout(WAIT_S):
             _, message = await anext(commands)
@@ -243,50 +264,50 @@ async def test_a_flood_of_forgeries_is_counted_in_full_and_logged_rarely(
     lines = [r.getMessage() for r in caplog.records if "not believed" in r.getMessage()]
     assert len(lines) == 3  # the 1st, 10th and 100th
     assert "100 so far" in lines[-1]
-    assert "'agent-1'" in lines[-1]
+    assert "'agent-2'" in lines[-1]
     assert "standoff/v1/command/all" in lines[-1]
 
 
 async def test_a_client_with_an_identity_publishes_only_as_itself_on_its_topics() -> None:
     broker = InProcessBroker()
     async with (
-        open_bus(None, broker=broker, client_id="agent-1", identity="agent-1") as agent1,
+        open_bus(None, broker=broker, client_id="agent-2", identity="agent-2") as agent2,
         open_bus(None, broker=broker, client_id="ground") as ground,
         ground.subscribe(topics.ALL) as sub,
     ):
-        await agent1.publish(topics.status(1), status("agent-1", 1))
+        await agent2.publish(topics.status(1), status("agent-2", 1))
         refused = [
-            (topics.status(0), status("agent-0", 0)),  # as another agent
-            (topics.status(0), status("agent-1", 0)),  # on another's topic
-            (topics.status(1), status("agent-1", 0)),  # about another vehicle
+            (topics.status(0), status("agent-1", 0)),  # as another agent
+            (topics.status(0), status("agent-2", 0)),  # on another's topic
+            (topics.status(1), status("agent-2", 0)),  # about another vehicle
             (topics.command(), command("ground")),  # as the ground
-            (topics.command(), command("agent-1")),  # on the ground's topic
+            (topics.command(), command("agent-2")),  # on the ground's topic
         ]
         for topic, message in refused:
-            with pytest.raises(BusError, match="agent-1"):
-                await agent1.publish(topic, message)
+            with pytest.raises(BusError, match="agent-2"):
+                await agent2.publish(topic, message)
         async with asyncio.timeout(WAIT_S):
-            assert await anext(sub) == (topics.status(1), status("agent-1", 1))
+            assert await anext(sub) == (topics.status(1), status("agent-2", 1))
         assert sub.pending() == 0
-        assert agent1.stats.published == 1
+        assert agent2.stats.published == 1
 
 
 def test_an_mqtt_bus_logs_in_as_its_identity() -> None:
-    bus = MqttBus("mqtt://127.0.0.1:1883", client_id="agent-1", login=Login("agent-1", "pw"))
-    assert bus.identity == "agent-1"
-    assert bus.url.username == "agent-1"
+    bus = MqttBus("mqtt://127.0.0.1:1883", client_id="agent-2", login=Login("agent-2", "pw"))
+    assert bus.identity == "agent-2"
+    assert bus.url.username == "agent-2"
     assert "pw" not in repr(bus)
     assert "pw" not in str(bus.url)
     with pytest.raises(BusError, match="names user 'ground'"):
-        MqttBus("mqtt://ground:x@127.0.0.1:1883", login=Login("agent-1", "pw"))
+        MqttBus("mqtt://ground:x@127.0.0.1:1883", login=Login("agent-2", "pw"))
 
 
 def test_a_login_reads_its_password_from_a_file_or_the_environment(tmp_path: Path) -> None:
-    secret = tmp_path / "agent-1.password"
+    secret = tmp_path / "agent-2.password"
     secret.write_text("s3cret\n", encoding="utf-8")
-    assert Login.load("agent-1", password_file=secret).password == "s3cret"
+    assert Login.load("agent-2", password_file=secret).password == "s3cret"
     env = {"STANDOFF_BUS_PASSWORD": "from-env"}
-    login = Login.load("agent-1", password_env="STANDOFF_BUS_PASSWORD", environ=env)
+    login = Login.load("agent-2", password_env="STANDOFF_BUS_PASSWORD", environ=env)
     assert login.password == "from-env"
     assert "from-env" not in repr(login)
     (tmp_path / "empty").write_text("\n", encoding="utf-8")
@@ -297,7 +318,7 @@ def test_a_login_reads_its_password_from_a_file_or_the_environment(tmp_path: Pat
         ({"password_file": secret, "password_env": "X"}, "not both"),
     ]:
         with pytest.raises(BusError, match=reason):
-            Login.load("agent-1", environ={}, **kwargs)  # type: ignore[arg-type]
+            Login.load("agent-2", environ={}, **kwargs)  # type: ignore[arg-type]
 
 
 # --- the shipped mosquitto configuration ----------------------------------------------------
@@ -313,7 +334,7 @@ def test_the_shipped_files_are_what_standoff_broker_writes_for_three() -> None:
 
 def test_the_acl_grants_each_login_what_the_rule_permits() -> None:
     """Every topic the ACL lets a login write, the app's rule lets it send on (and back)."""
-    team = ["ground", "agent-0", "agent-1", "agent-2", "observer"]
+    team = ["ground", "agent-1", "agent-2", "agent-3", "observer"]
     samples = [topics.status(v) for v in range(3)]
     samples += [topics.link(v) for v in range(3)] + [topics.link("ground")]
     samples += [topics.local_estimate(v) for v in range(3)]
@@ -357,12 +378,12 @@ def raw_client(broker: Mosquitto, identity: str, **kwargs: object) -> aiomqtt.Cl
     )
 
 
-def attacks_of_agent_1() -> list[tuple[Topic, Message]]:
+def attacks_of_agent_2() -> list[tuple[Topic, Message]]:
     """A well-formed message on every topic of another vehicle and of the ground, each
     claiming to come from the topic's owner."""
     out: list[tuple[Topic, Message]] = []
     for v in (0, 2):
-        owner = f"agent-{v}"
+        owner = f"agent-{v + 1}"
         out += [
             (topics.status(v), status(owner, v, t_s=10_000.0)),
             (topics.link(v), presence(owner, v)),
@@ -380,23 +401,23 @@ def attacks_of_agent_1() -> list[tuple[Topic, Message]]:
     return out
 
 
-def own_of_agent_1() -> list[tuple[Topic, Message]]:
+def own_of_agent_2() -> list[tuple[Topic, Message]]:
     return [
-        (topics.status(1), status("agent-1", 1)),
-        (topics.link(1), presence("agent-1", 1)),
-        (topics.local_estimate(1), local("agent-1", 1)),
-        (topics.observation(1), observation("agent-1", 1)),
+        (topics.status(1), status("agent-2", 1)),
+        (topics.link(1), presence("agent-2", 1)),
+        (topics.local_estimate(1), local("agent-2", 1)),
+        (topics.observation(1), observation("agent-2", 1)),
     ]
 
 
 async def test_the_shipped_broker_refuses_agent_1_anything_but_its_own_topics(
     team_broker: Mosquitto,
 ) -> None:
-    """Logged in as agent-1, a client publishes (QoS 0 and 1, retained too) on every topic of
+    """Logged in as agent-2, a client publishes (QoS 0 and 1, retained too) on every topic of
     vehicles 0 and 2 and of the ground: a subscriber to everything (a raw MQTT client, so that
     the app's own rule cannot hide what the broker let through) receives none of it, nor any
-    retained copy later; what agent-1 publishes on its own topics arrives."""
-    attacks, own = attacks_of_agent_1(), own_of_agent_1()
+    retained copy later; what agent-2 publishes on its own topics arrives."""
+    attacks, own = attacks_of_agent_2(), own_of_agent_2()
     received: list[str] = []
     own_arrived = asyncio.Event()
     async with raw_client(team_broker, "observer") as observer:
@@ -410,17 +431,17 @@ async def test_the_shipped_broker_refuses_agent_1_anything_but_its_own_topics(
 
         async with asyncio.TaskGroup() as tg:
             listener = tg.create_task(listen())
-            async with raw_client(team_broker, "agent-1") as agent1:
+            async with raw_client(team_broker, "agent-2") as agent2:
                 for qos in (0, 1):
                     for topic, message in attacks:
-                        await agent1.publish(topic.value, encode(message), qos=qos, retain=True)
+                        await agent2.publish(topic.value, encode(message), qos=qos, retain=True)
                 for topic, message in own:
-                    await agent1.publish(topic.value, encode(message), qos=1)
+                    await agent2.publish(topic.value, encode(message), qos=1)
             async with asyncio.timeout(WAIT_S):
                 await own_arrived.wait()
             await asyncio.sleep(0.3)  # anything the broker let through would be here by now
             listener.cancel()
-    print("\nagent-1 on the shipped broker (topic: what a subscriber to everything got):")
+    print("\nagent-2 on the shipped broker (topic: what a subscriber to everything got):")
     for topic, _ in attacks:
         print(f"  {topic.value:38} refused: {received.count(topic.value)} of 2 delivered")
     for topic, _ in own:
@@ -448,27 +469,27 @@ async def test_a_refused_publish_is_counted_and_the_app_drops_forgeries_the_brok
     async with (
         open_bus(
             team_broker.url,
+            client_id="agent-2",
+            login=team_broker.login("agent-2"),
+            connect_timeout_s=WAIT_S,
+        ) as agent2,
+        open_bus(
+            team_broker.url,
             client_id="agent-1",
             login=team_broker.login("agent-1"),
             connect_timeout_s=WAIT_S,
         ) as agent1,
-        open_bus(
-            team_broker.url,
-            client_id="agent-0",
-            login=team_broker.login("agent-0"),
-            connect_timeout_s=WAIT_S,
-        ) as agent0,
-        agent0.subscribe(topics.ALL_COMMANDS) as commands,
-        agent0.subscribe(topics.observation(0)) as observations,
+        agent1.subscribe(topics.ALL_COMMANDS) as commands,
+        agent1.subscribe(topics.observation(0)) as observations,
         raw_client(team_broker, "ground") as ground,
     ):
-        assert isinstance(agent1, MqttBus)
-        agent1.identity = None  # a buggy or hostile client: no check of its own
-        await agent1.publish(topics.command(), command("ground"), qos=1)
-        await agent1.publish(topics.status(0), status("agent-0", 0), qos=1)
-        assert agent1.stats.denied == 2
-        # the ground may write obs/0, but not as agent-1 (nor for vehicle 1)
-        await ground.publish(topics.observation(0).value, encode(observation("agent-1", 0)))
+        assert isinstance(agent2, MqttBus)
+        agent2.identity = None  # a buggy or hostile client: no check of its own
+        await agent2.publish(topics.command(), command("ground"), qos=1)
+        await agent2.publish(topics.status(0), status("agent-1", 0), qos=1)
+        assert agent2.stats.denied == 2
+        # the ground may write obs/0, but not as agent-2 (nor for index 1)
+        await ground.publish(topics.observation(0).value, encode(observation("agent-2", 0)))
         await ground.publish(topics.observation(0).value, encode(observation("ground", 1)))
         await ground.publish(topics.observation(0).value, encode(observation("ground", 0)))
         await ground.publish(topics.command().value, encode(command("ground")), qos=1)
@@ -476,13 +497,13 @@ async def test_a_refused_publish_is_counted_and_the_app_drops_forgeries_the_brok
             assert (await anext(observations))[1] == observation("ground", 0)
             assert (await anext(commands))[1] == command("ground")
         assert commands.pending() == 0
-        assert agent0.drops["wrong_sender"] == 1
-        assert agent0.drops["wrong_vehicle"] == 1
+        assert agent1.drops["wrong_sender"] == 1
+        assert agent1.drops["wrong_vehicle"] == 1
 
 
 async def test_the_shipped_broker_takes_logins_only(team_broker: Mosquitto) -> None:
     url = team_broker.url
-    for login in (None, Login("agent-1", team_broker.login("agent-0").password), Login("x", "y")):
+    for login in (None, Login("agent-2", team_broker.login("agent-1").password), Login("x", "y")):
         bus = open_bus(url, login=login, connect_timeout_s=WAIT_S)
         async with asyncio.timeout(WAIT_S / 2):
             with pytest.raises(BusError, match="refused the connection"):
@@ -495,13 +516,13 @@ async def test_the_shipped_broker_takes_logins_only(team_broker: Mosquitto) -> N
 def test_write_team_keeps_secrets_private(tmp_path: Path) -> None:
     files = write_team(tmp_path / "team", 2, passwords={"ground": "ground-secret-xyz"})
     assert files.password("ground") == "ground-secret-xyz"
-    assert len({files.password(who) for who in ("agent-0", "agent-1", "observer")}) == 3
-    assert files.password_files["agent-1"].stat().st_mode & 0o777 == 0o600
+    assert len({files.password(who) for who in ("agent-1", "agent-2", "observer")}) == 3
+    assert files.password_files["agent-2"].stat().st_mode & 0o777 == 0o600
     assert (files.directory / "secrets").stat().st_mode & 0o777 == 0o700
     assert files.passwd.stat().st_mode & 0o777 == 0o640
     assert "ground-secret-xyz" not in files.passwd.read_text(encoding="utf-8")
-    assert "user agent-1\n" in files.acl.read_text(encoding="utf-8")
-    assert "user agent-2" not in files.acl.read_text(encoding="utf-8")
+    assert "user agent-2\n" in files.acl.read_text(encoding="utf-8")
+    assert "user agent-3" not in files.acl.read_text(encoding="utf-8")
     assert files.mission_key.stat().st_mode & 0o777 == 0o600
     assert len(MissionKey.load(files.mission_key).secret) == 32
 
@@ -514,7 +535,7 @@ def test_standoff_broker_writes_a_team_that_mosquitto_runs(tmp_path: Path) -> No
 
     assert main(["broker", "--vehicles", "2", "--out", str(tmp_path / "b"), "--port", "1"]) == 0
     assert (tmp_path / "b" / "acl").read_text(encoding="utf-8") == acl_text(2)
-    for who in ("ground", "agent-0", "agent-1", "observer"):
+    for who in ("ground", "agent-1", "agent-2", "observer"):
         assert (tmp_path / "b" / "secrets" / f"{who}.password").read_text(encoding="utf-8")
     assert main(["broker", "--vehicles", "0", "--out", str(tmp_path / "c")]) == 2
 
@@ -544,14 +565,14 @@ def test_each_process_logs_in_as_its_identity_from_the_config_or_the_options(
         "password_file": f"{tmp_path}/secrets/{{client}}.password",
     }
     config = mission_config(table)
-    for who in ("ground", "agent-1"):
+    for who in ("ground", "agent-2"):
         login = bus_options(login_args(), config, who)["login"]
         assert login == Login(who, files.password(who))
     monkeypatch.setenv("AGENT_PW", "from-env")
-    options = bus_options(login_args(password_env="AGENT_PW"), config, "agent-0")
-    assert options["login"] == Login("agent-0", "from-env")  # the option wins over the file
+    options = bus_options(login_args(password_env="AGENT_PW"), config, "agent-1")
+    assert options["login"] == Login("agent-1", "from-env")  # the option wins over the file
     keyed = mission_config({**table, "mission_key_file": str(files.mission_key)})
-    assert bus_options(login_args(), keyed, "agent-1")["mission_key"] == MissionKey.load(
+    assert bus_options(login_args(), keyed, "agent-2")["mission_key"] == MissionKey.load(
         files.mission_key
     )
     plain = mission_config("mqtt://127.0.0.1:1883")
@@ -566,7 +587,7 @@ def test_each_process_logs_in_as_its_identity_from_the_config_or_the_options(
         (login_args(key_file="k"), plain, "without its certificate"),
     ]:
         with pytest.raises(ConfigError, match=reason):
-            bus_options(args, config_, "agent-1")
+            bus_options(args, config_, "agent-2")
     with pytest.raises(ConfigError, match="not both"):
         mission_config({"url": "mqtt://h:1", "password_file": "f", "password_env": "E"})
 
@@ -645,13 +666,13 @@ async def test_a_sealed_presence_older_than_what_it_outlives_is_still_taken(
     """A last will is sealed when its client connects; the broker sends it after the client's
     later messages on the same presence topic."""
     h = sealed
-    will = Sealer(h.key).seal(topics.link(1).value, encode(presence("agent-1", 1)))
-    online = LinkState(sender="agent-1", t_s=2.0, online=True, vehicle=1)
+    will = Sealer(h.key).seal(topics.link(1).value, encode(presence("agent-2", 1)))
+    online = LinkState(sender="agent-2", t_s=2.0, online=True, vehicle=1)
     async with h.receiver.subscribe(topics.ALL_LINKS) as links:
         await h.sender.publish(topics.link(1), online)
         await h.inject(topics.link(1).value, will)
         async with asyncio.timeout(WAIT_S):
-            assert [(await anext(links))[1] for _ in range(2)] == [online, presence("agent-1", 1)]
+            assert [(await anext(links))[1] for _ in range(2)] == [online, presence("agent-2", 1)]
 
 
 def test_a_receiver_without_the_key_counts_sealed_payloads_as_malformed() -> None:
@@ -701,15 +722,15 @@ def certificate(tmp_path: Path, name: str, ca: tuple[Path, Path] | None, *extra:
 @pytest.mark.slow
 async def test_with_client_certificates_the_common_name_is_the_login(tmp_path: Path) -> None:
     """The shipped configuration with a TLS listener that requires a client certificate and
-    takes its CN as the login (the commented lines of mosquitto.conf): agent-1's certificate
-    gets it agent-1's topics, and only those; no certificate, no connection."""
+    takes its CN as the login (the commented lines of mosquitto.conf): agent-2's certificate
+    gets it agent-2's topics, and only those; no certificate, no connection."""
     from app.cli._login import bus_options
 
     ca = (certificate(tmp_path, "standoff-ca", None), tmp_path / "standoff-ca.key")
     ext = tmp_path / "san.ext"
     ext.write_text("subjectAltName=IP:127.0.0.1\n", encoding="ascii")
     server = certificate(tmp_path, "127.0.0.1", ca, "-extfile", str(ext))
-    client = certificate(tmp_path, "agent-1", ca)
+    client = certificate(tmp_path, "agent-2", ca)
     tls_lines = (
         f"cafile {ca[0]}\ncertfile {server}\nkeyfile {tmp_path / '127.0.0.1.key'}\n"
         "require_certificate true\nuse_identity_as_username true\n"
@@ -721,23 +742,23 @@ async def test_with_client_certificates_the_common_name_is_the_login(tmp_path: P
             broker=broker.url,
             ca_file=str(ca[0]),
             cert_file=str(client),
-            key_file=str(tmp_path / "agent-1.key"),
+            key_file=str(tmp_path / "agent-2.key"),
         )
-        options = bus_options(args, mission_config(broker.url), "agent-1")
+        options = bus_options(args, mission_config(broker.url), "agent-2")
         assert "login" not in options  # no password: the certificate is the login
         async with (
-            open_bus(broker.url, client_id="agent-1", identity="agent-1", **options) as agent1,
-            agent1.subscribe(topics.ALL) as everything,
+            open_bus(broker.url, client_id="agent-2", identity="agent-2", **options) as agent2,
+            agent2.subscribe(topics.ALL) as everything,
         ):
-            assert isinstance(agent1, MqttBus)
-            agent1.identity = None  # let it try another vehicle's topic
-            await agent1.publish(topics.status(0), status("agent-0", 0), qos=1)
-            await agent1.publish(topics.status(1), status("agent-1", 1), qos=1)
+            assert isinstance(agent2, MqttBus)
+            agent2.identity = None  # let it try another vehicle's topic
+            await agent2.publish(topics.status(0), status("agent-1", 0), qos=1)
+            await agent2.publish(topics.status(1), status("agent-2", 1), qos=1)
             async with asyncio.timeout(WAIT_S):
-                assert await anext(everything) == (topics.status(1), status("agent-1", 1))
+                assert await anext(everything) == (topics.status(1), status("agent-2", 1))
             await asyncio.sleep(0.2)
             assert everything.pending() == 0
-            assert agent1.stats.denied == 1
+            assert agent2.stats.denied == 1
         with pytest.raises(BusError, match=r"cannot connect|refused"):
             async with open_bus(broker.url, connect_timeout_s=1.0, tls_context=tls_context(ca[0])):
                 pass

@@ -121,12 +121,12 @@ async def test_a_retained_birth_is_heard_after_a_broker_restart(mosquitto: Mosqu
     # before the client (live) or after it (the retained copy).
     fast = Backoff(initial_s=0.05, max_s=0.5)
     birth = Birth(
-        topics.link(3), LinkState(sender="agent-3", t_s=0.0, online=True, vehicle=3), retain=True
+        topics.link(3), LinkState(sender="agent-4", t_s=0.0, online=True, vehicle=3), retain=True
     )
     async with (
         MqttBus(mosquitto.url, client_id="watcher", backoff=fast) as watcher,
         watcher.subscribe(topics.ALL_LINKS) as links,
-        MqttBus(mosquitto.url, client_id="agent-3", birth=birth, backoff=fast) as bus,
+        MqttBus(mosquitto.url, client_id="agent-4", birth=birth, backoff=fast) as bus,
     ):
         assert await take(links, 1) == [(birth.topic, birth.message)]
         mosquitto.restart()
@@ -146,9 +146,9 @@ WILL_CLIENT = textwrap.dedent(
     from app.runtime.ports.messages import LinkState
 
     async def main(url):
-        will = Will(topics.link(5), LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5))
-        async with MqttBus(url, client_id="agent-5", will=will) as bus:
-            online = LinkState(sender="agent-5", t_s=0.0, online=True, vehicle=5)
+        will = Will(topics.link(5), LinkState(sender="agent-6", t_s=0.0, online=False, vehicle=5))
+        async with MqttBus(url, client_id="agent-6", will=will) as bus:
+            online = LinkState(sender="agent-6", t_s=0.0, online=True, vehicle=5)
             await bus.publish(topics.link(5), online)
             print("ready", flush=True)
             await asyncio.Event().wait()
@@ -186,7 +186,7 @@ async def test_last_will_is_delivered_when_a_client_process_dies(mosquitto: Mosq
                 proc.kill()
                 await proc.wait()
     assert topic == topics.link(5)
-    assert will == LinkState(sender="agent-5", t_s=0.0, online=False, vehicle=5)
+    assert will == LinkState(sender="agent-6", t_s=0.0, online=False, vehicle=5)
 
 
 @pytest.mark.parametrize(

@@ -13,8 +13,9 @@ def test_check_prints_the_vehicles_ports_stages_and_nothing_to_set_on_the_simula
     assert main(["check", "test-short", "--base-port", "15000"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("test-short: valid")
-    for i in range(3):  # vehicle (system id), agent index, altitude of the stack, its port
-        assert f"{i + 1:>19}  {i:>11}  {100 + 35 * i:>6} m  udpin://127.0.0.1:{15000 + i}" in out
+    for i in range(3):  # vehicle (system id), agent login, --vehicle, altitude, its port
+        row = f"{i + 1:>19}  {f'agent-{i + 1}':>11}  {i + 1:>9}  {100 + 35 * i:>6} m"
+        assert f"{row}  udpin://127.0.0.1:{15000 + i}" in out
     assert "until 5 s" in out
     assert "within 15 m of the circle" in out
     assert "velocity:\n    none" in out

@@ -86,7 +86,7 @@ def test_fly_validates_its_options_like_the_config_file(args, field, tmp_path, c
 
 @pytest.mark.parametrize(
     "command",
-    [["ground", "--broker", "mqtt://127.0.0.1:1"], ["agent", "--vehicle", "0"]],
+    [["ground", "--broker", "mqtt://127.0.0.1:1"], ["agent", "--vehicle", "1"]],
 )
 @pytest.mark.parametrize(
     ("args", "field"),

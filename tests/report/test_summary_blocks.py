@@ -16,18 +16,18 @@ from app.report.provenance import run_block
 def _agent_file(out, i, ticks):
     counters = {"bus": {"malformed": 0}, "agent": {"ticks": ticks}, "link": {"setpoints": ticks}}
     document = {"vehicle": i, "reason": "shutdown", "counters": counters}
-    (out / f"agent-{i}.json").write_text(json.dumps(document))
+    (out / f"agent-{i + 1}.json").write_text(json.dumps(document))
 
 
 def test_the_agents_files_in_the_run_folder_are_read_and_bad_ones_left_out(tmp_path, caplog):
     _agent_file(tmp_path, 0, 10)
-    (tmp_path / "agent-1.json").write_text("{not json")
+    (tmp_path / "agent-2.json").write_text("{not json")
     _agent_file(tmp_path, 2, 30)
     with caplog.at_level(logging.WARNING):
-        found = agent_files(tmp_path, 4)  # agent 3 elsewhere: no file
+        found = agent_files(tmp_path, 4)  # vehicle index 3 (agent-4) elsewhere: no file
     assert sorted(found) == [0, 2]
     assert found[2]["agent"] == {"ticks": 30}
-    assert "agent-1.json: cannot read the agent's counters" in caplog.text
+    assert "agent-2.json: cannot read the agent's counters" in caplog.text
 
 
 def test_the_grounds_summary_carries_the_agents_blocks_keyed_from_1(tmp_path):

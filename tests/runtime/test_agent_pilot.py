@@ -68,7 +68,7 @@ async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> Non
     events = Events()
     statuses: list[bus.VehicleStatus] = []
     async with (
-        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
         InProcessBus(broker, client_id="ground") as ground,
         ground.subscribe(topics.ALL_STATUS) as heard,
         asyncio.TaskGroup() as tg,
@@ -135,7 +135,7 @@ async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude(
     for i in range(plan.count):
         link = QueueLink()
         async with (
-            InProcessBus(broker, client_id=f"agent-{i}") as agent_bus,
+            InProcessBus(broker, client_id=f"agent-{i + 1}") as agent_bus,
             asyncio.TaskGroup() as tg,
         ):
             agent = vehicle_agent(plan, i, link, agent_bus, Events(), builtin=True)
@@ -250,7 +250,7 @@ async def test_the_phase_actuator_is_resolved_against_what_the_autopilot_honours
     link = QueueLink()
     link.honours_speed = honours_speed
     events = Events()
-    async with InProcessBus(InProcessBroker(), client_id="agent-0") as agent_bus:
+    async with InProcessBus(InProcessBroker(), client_id="agent-1") as agent_bus:
         runtime = AgentRuntimeParams(phase_actuator=configured)  # type: ignore[arg-type]
         agent = VehicleAgent(plan.agents[0], link, agent_bus, events, runtime)
     assert agent.actuator == actuator
@@ -300,7 +300,7 @@ async def test_typed_lines_reach_the_agents_as_commands_and_bad_ones_are_skipped
     events = Events()
     async with (
         InProcessBus(broker, client_id="operator") as operator,
-        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id="agent-2") as agent_bus,
         agent_bus.subscribe(topics.ALL_COMMANDS) as commands,
     ):
         await relay_operator(typed(), operator, events, 3, lambda: 42.0)

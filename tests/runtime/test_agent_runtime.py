@@ -53,7 +53,7 @@ async def test_only_the_newest_of_the_fused_estimates_waiting_is_applied(queued:
     broker = InProcessBroker()
     link = QueueLink()
     async with (
-        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
         InProcessBus(broker, client_id="ground") as ground,
         asyncio.TaskGroup() as tg,
     ):
@@ -97,7 +97,7 @@ async def test_observations_that_queued_while_the_agent_was_busy_are_merged():
         t = 0.1 * k
         link.seen.put_nowait(TargetObservation(1, t, 0.0, 0.0, 0.0, 7.0 * t, 0.0, 1.0))
     async with (
-        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
         asyncio.TaskGroup() as tg,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())

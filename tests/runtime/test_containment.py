@@ -29,7 +29,7 @@ EYE = tuple(tuple(1.0 if i == j else 0.0 for j in range(6)) for i in range(6))
 
 def status(t: float, vehicle: int = 0) -> bus.VehicleStatus:
     return bus.VehicleStatus(
-        sender=f"agent-{vehicle}", t_s=t, vehicle=vehicle, east_m=90.0, north_m=0.0,
+        sender=f"agent-{vehicle + 1}", t_s=t, vehicle=vehicle, east_m=90.0, north_m=0.0,
         alt_m=100.0, course_rad=0.0, speed_m_s=14.0, phase_rad=0.0, stage="gather",
         link="ok", healthy=True,
     )  # fmt: skip
@@ -63,14 +63,14 @@ async def test_the_ground_counts_a_message_whose_handling_fails_and_goes_on(
     broker = InProcessBroker()
     async with (
         InProcessBus(broker, client_id="ground") as ground_bus,
-        InProcessBus(broker, client_id="agent-0") as agent,
+        InProcessBus(broker, client_id="agent-1") as agent,
     ):
         station = GroundStation(plan.ground, GroundRuntimeParams(end_t_s=3.0), ground_bus, Events())
         async with asyncio.TaskGroup() as tg:
             run = tg.create_task(station.run())
             await asyncio.sleep(0)
             for t in (1.0, 1.5, 2.0):
-                local = bus.LocalEstimate(sender="agent-0", t_s=t, vehicle=0, x=(0.0,) * 6, P=EYE)
+                local = bus.LocalEstimate(sender="agent-1", t_s=t, vehicle=0, x=(0.0,) * 6, P=EYE)
                 await agent.publish(topics.local_estimate(0), local)
             for t in (1.0, 1e308, 2.0, 3.0):  # 1e308 once killed it (OverflowError)
                 await agent.publish(topics.status(0), status(t))
@@ -92,7 +92,7 @@ async def test_a_mission_whose_vehicles_all_go_silent_ends_and_says_why() -> Non
     events = Events()
     async with (
         InProcessBus(broker, client_id="ground") as ground_bus,
-        InProcessBus(broker, client_id="agent-0") as agent,
+        InProcessBus(broker, client_id="agent-1") as agent,
     ):
         station = GroundStation(
             plan.ground,
@@ -125,7 +125,7 @@ async def test_an_outage_ends_when_a_status_comes_back() -> None:
     events = Events()
     async with (
         InProcessBus(broker, client_id="ground") as ground_bus,
-        InProcessBus(broker, client_id="agent-0") as agent,
+        InProcessBus(broker, client_id="agent-1") as agent,
     ):
         station = GroundStation(
             plan.ground,
@@ -170,7 +170,7 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
     broker = InProcessBroker()
     link = QueueLink()
     async with (
-        InProcessBus(broker, client_id="agent-0") as agent_bus,
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
         InProcessBus(broker, client_id="ground") as ground,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
@@ -201,7 +201,7 @@ async def test_the_grounds_bus_drops_are_in_its_report() -> None:
     broker = InProcessBroker()
     async with (
         InProcessBus(broker, client_id="ground") as ground_bus,
-        InProcessBus(broker, client_id="agent-1") as agent,
+        InProcessBus(broker, client_id="agent-2") as agent,
     ):
         station = GroundStation(plan.ground, GroundRuntimeParams(end_t_s=2.0), ground_bus, Events())
         async with asyncio.TaskGroup() as tg:

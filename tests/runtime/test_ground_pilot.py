@@ -34,7 +34,7 @@ async def until(predicate: Callable[[], bool]) -> None:
 
 def status(vehicle: int, t_s: float, control: str = "mission") -> bus.VehicleStatus:
     return bus.VehicleStatus(
-        sender=f"agent-{vehicle}",
+        sender=f"agent-{vehicle + 1}",
         t_s=t_s,
         vehicle=vehicle,
         east_m=-1000.0 + 150.0 * vehicle,

@@ -40,7 +40,7 @@ async def fly_bursts(
     link = BurstyLink()
     events = Events()
     async with (
-        InProcessBus(InProcessBroker(), client_id="agent-0") as bus,
+        InProcessBus(InProcessBroker(), client_id="agent-1") as bus,
         asyncio.TaskGroup() as tg,
     ):
         agent = VehicleAgent(plan.agents[0], link, bus, events, runtime or AgentRuntimeParams())

@@ -134,7 +134,7 @@ async def _async_run(
     async with AsyncExitStack() as stack:
         ground_bus = await stack.enter_async_context(InProcessBus(broker, client_id="ground"))
         buses = [
-            await stack.enter_async_context(InProcessBus(broker, client_id=f"agent-{i}"))
+            await stack.enter_async_context(InProcessBus(broker, client_id=f"agent-{i + 1}"))
             for i in range(plan.count)
         ]
         tg = await stack.enter_async_context(asyncio.TaskGroup())
@@ -148,7 +148,8 @@ async def _async_run(
         ground = tg.create_task(station.run(), name="ground")
         agents = [
             tg.create_task(
-                VehicleAgent(plan.agents[i], link, bus, Silent(), runtime).run(), name=f"agent-{i}"
+                VehicleAgent(plan.agents[i], link, bus, Silent(), runtime).run(),
+                name=f"agent-{i + 1}",
             )
             for i, (link, bus) in enumerate(zip(links, buses, strict=True))
         ]

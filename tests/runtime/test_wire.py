@@ -29,7 +29,7 @@ def test_local_estimate_with_models_round_trips():
         model_p=np.stack([spd(rng) for _ in range(3)]),
         alloc_t_s=12.25,
     )
-    back = local_to_core(through_json(local_to_bus(local, 2, "agent-2")))
+    back = local_to_core(through_json(local_to_bus(local, 2, "agent-3")))
     assert back.sensor == "2"
     assert back.t_s == 12.5
     assert back.q_scale == 2.5
@@ -59,7 +59,7 @@ def test_the_allocation_basis_round_trips():
     says up to when each filter's own estimates are in it."""
     rng = np.random.default_rng(5)
     before = est.LocalEstimate("1", 2.0, rng.normal(size=6), spd(rng), np.array([1.0]))
-    message = through_json(local_to_bus(before, 1, "agent-1"))
+    message = through_json(local_to_bus(before, 1, "agent-2"))
     assert message.alloc_t_s is None
     assert local_to_core(message).alloc_t_s is None
     fused = est.GlobalEstimate(

@@ -195,7 +195,7 @@ async def start_team(
     returns once every vehicle is under offboard control."""
     agents = [
         await stack.enter_async_context(
-            standoff("agent", "--vehicle", str(i), *common, stderr_path=tmp_path / f"a{i}.err")
+            standoff("agent", "--vehicle", str(i + 1), *common, stderr_path=tmp_path / f"a{i}.err")
         )
         for i in range(vehicles)
     ]
@@ -305,7 +305,7 @@ class TeamRun:
     ground: Standoff
     agents: list[Standoff]
     codes: list[int]
-    forged: int = 0  # messages an intruder logged in as agent-1 tried to publish
+    forged: int = 0  # messages an intruder logged in as agent-2 tried to publish
     forged_denied: int = 0  # of which the broker refused
 
 
@@ -313,7 +313,7 @@ EYE = tuple(tuple(float(i == j) for j in range(6)) for i in range(6))
 
 
 async def forge_as_agent_1(broker: Mosquitto, rounds: int = 5) -> tuple[int, int]:
-    """A second client logged in as agent-1, holding the team's key (an insider), tries to take
+    """A second client logged in as agent-2, holding the team's key (an insider), tries to take
     the mission over at 5 rounds a second: shutdown and hold on ``command/all`` claiming to be
     the ground, vehicle 0's status 10,000 s ahead, the fused estimate 500 m off, the mission
     back to standby. QoS 1, so that the broker says what it did; returns (sent, refused)."""
@@ -324,7 +324,7 @@ async def forge_as_agent_1(broker: Mosquitto, rounds: int = 5) -> tuple[int, int
         (
             topics.status(0),
             bus.VehicleStatus(
-                sender="agent-0",
+                sender="agent-1",
                 t_s=10_000.0,
                 vehicle=0,
                 east_m=0.0,
@@ -351,7 +351,7 @@ async def forge_as_agent_1(broker: Mosquitto, rounds: int = 5) -> tuple[int, int
     ]
     key = MissionKey.load(broker.team.mission_key)
     async with open_bus(
-        broker.url, client_id="intruder", login=broker.login("agent-1"), mission_key=key
+        broker.url, client_id="intruder", login=broker.login("agent-2"), mission_key=key
     ) as intruder:
         assert isinstance(intruder, MqttBus)
         intruder.identity = None  # no check of its own: it publishes what it likes
@@ -383,7 +383,7 @@ async def team_run(tmp_path_factory: pytest.TempPathFactory) -> TeamRun:
             # off before it heard a stage change flies the old stage meanwhile)
             for i in range(3):
                 await wait_for_event(
-                    out / f"events-agent-{i}.jsonl", 90.0, kind="agent_stage", stage="track"
+                    out / f"events-agent-{i + 1}.jsonl", 90.0, kind="agent_stage", stage="track"
                 )
             forged, forged_denied = await forge_as_agent_1(mosquitto)
             await asyncio.to_thread(mosquitto.stop)
@@ -396,13 +396,13 @@ async def team_run(tmp_path_factory: pytest.TempPathFactory) -> TeamRun:
 
 def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRun) -> None:
     out = team_run.out
-    # the intruder logged in as agent-1: the broker refused every one of its forgeries
+    # the intruder logged in as agent-2: the broker refused every one of its forgeries
     assert team_run.forged == team_run.forged_denied == 25
     for i, (agent, code) in enumerate(zip(team_run.agents, team_run.codes, strict=True)):
         assert code == 0, agent.transcript()
-        assert f"agent {i}: shutdown by the ground station" in agent.stdout()
+        assert f"agent {i + 1}: shutdown by the ground station" in agent.stdout()
         assert "hold on exit failed" not in agent.stderr(), agent.transcript()
-        report = json.loads((out / f"agent-{i}.json").read_text())
+        report = json.loads((out / f"agent-{i + 1}.json").read_text())
         assert report["reason"] == "shutdown"
         assert report["counters"]["agent"]["ticks"] > 100
         assert report["counters"]["link"]["setpoints"] > 100
@@ -412,7 +412,7 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         assert report["counters"]["bus"]["refused"] == 0
         assert report["counters"]["bus"]["denied"] == 0
         assert (out / f"vehicle-{i + 1}.tlog").stat().st_size > 10_000
-        agent_events = [json.loads(line) for line in (out / f"events-agent-{i}.jsonl").open()]
+        agent_events = [json.loads(line) for line in (out / f"events-agent-{i + 1}.jsonl").open()]
         kinds = [e["kind"] for e in agent_events]
         assert "offboard" in kinds
         # events number vehicles from 1
@@ -448,10 +448,10 @@ def test_a_broker_restart_mid_mission_is_survived(team_run: TeamRun) -> None:
     back_t = 0.0  # mission time by which every agent was back on the bus
     for i, (agent, code) in enumerate(zip(team_run.agents, team_run.codes, strict=True)):
         assert code == 0, agent.transcript()
-        assert f"agent {i}: shutdown by the ground station; vehicle {i + 1} in hold" in (
+        assert f"agent {i + 1}: shutdown by the ground station; vehicle {i + 1} in hold" in (
             agent.stdout()
         )
-        report = json.loads((out / f"agent-{i}.json").read_text())
+        report = json.loads((out / f"agent-{i + 1}.json").read_text())
         assert (report["reason"], report["held"]) == ("shutdown", True)
         assert report["counters"]["bus"]["reconnects"] == 1
         # it kept flying through the outage: its statuses were dropped, not waited for, and
@@ -459,7 +459,7 @@ def test_a_broker_restart_mid_mission_is_survived(team_run: TeamRun) -> None:
         assert report["counters"]["bus"]["unsent"] > 0
         assert report["counters"]["agent"]["offboard_restarts"] == 0
         assert report["counters"]["link"]["left_offboard"] == 0
-        agent_events = read_events(out / f"events-agent-{i}.jsonl")
+        agent_events = read_events(out / f"events-agent-{i + 1}.jsonl")
         kinds = [e["kind"] for e in agent_events]
         assert kinds.count("bus_lost") == kinds.count("bus_reconnected") == 1
         back_t = max(back_t, next(e for e in agent_events if e["kind"] == "bus_reconnected")["t_s"])
@@ -515,7 +515,7 @@ def test_the_processes_recordings_replay_to_the_ground_s_figures(
     """Each process recorded what it was fed, in its own file; put together in the run folder
     they replay (standoff replay) to the ground's stages and figures, the outage included."""
     names = sorted(p.name for p in team_run.out.glob("observations*.jsonl"))
-    assert names == [f"observations-agent-{i}.jsonl" for i in range(3)] + [
+    assert names == [f"observations-agent-{i + 1}.jsonl" for i in range(3)] + [
         "observations-ground.jsonl"
     ]
     assert main(["replay", str(team_run.out)]) == 0
@@ -559,7 +559,11 @@ async def signalled_run(tmp_path_factory: pytest.TempPathFactory) -> SignalledRu
             agent, other = [
                 await stack.enter_async_context(
                     standoff(
-                        "agent", "--vehicle", str(i), *common, stderr_path=tmp_path / f"a{i}.err"
+                        "agent",
+                        "--vehicle",
+                        str(i + 1),
+                        *common,
+                        stderr_path=tmp_path / f"a{i}.err",
                     )
                 )
                 for i in range(2)
@@ -595,9 +599,9 @@ def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(
     # the agent's hold, not the vehicle's offboard failsafe (which would go to hold too)
     assert "left OFFBOARD on its own" not in agent.stderr(), agent.transcript()
     assert "hold on exit failed" not in agent.stderr(), agent.transcript()
-    report = json.loads((out / "agent-0.json").read_text())
+    report = json.loads((out / "agent-1.json").read_text())
     assert (report["reason"], report["stopped_by"], report["held"]) == ("SIGTERM", 15, True)
-    agent_events = [json.loads(line) for line in (out / "events-agent-0.jsonl").open()]
+    agent_events = [json.loads(line) for line in (out / "events-agent-1.jsonl").open()]
     assert {"kind": "hold", "vehicle": 1, "reason": "SIGTERM"}.items() <= next(
         e for e in agent_events if e["kind"].startswith("hold")
     ).items()
@@ -635,7 +639,7 @@ async def test_agent_with_the_broker_down_exits_with_one_line(tmp_path: Path) ->
     mission = write_mission(tmp_path)
     port = free_port()  # nothing listens there
     async with standoff(
-        "agent", "--vehicle", "0", str(mission), "--broker", f"mqtt://127.0.0.1:{port}",
+        "agent", "--vehicle", "1", str(mission), "--broker", f"mqtt://127.0.0.1:{port}",
         "--out", str(tmp_path / "run"), stderr_path=tmp_path / "a.err",
     ) as agent:  # fmt: skip
         assert await agent.finish(40.0) == 2
@@ -672,9 +676,13 @@ def exit_code_of(argv: list[str]) -> int:
     ("args", "reason"),
     [
         (["--broker", "http://127.0.0.1:1883"], "bad broker URL"),
+        (  # numbered from 1, as the system id: a team of 3 is 1..3
+            ["--broker", "mqtt://127.0.0.1:1883", "--vehicle", "4"],
+            "standoff agent: error: --vehicle 4: the mission's vehicles are 1..3",
+        ),
         (
-            ["--broker", "mqtt://127.0.0.1:1883", "--vehicle", "3"],
-            "vehicle index 3 is out of range",
+            ["--broker", "mqtt://127.0.0.1:1883", "--vehicle", "0"],
+            "standoff agent: error: --vehicle 0: the mission's vehicles are 1..3",
         ),
         (["--broker", "mqtt://127.0.0.1:1883", "--connect", "udp://x"], "vehicle URL 'udp://x'"),
         ([], "no MQTT broker"),
@@ -684,7 +692,7 @@ def test_agent_bad_input_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], reason: str
 ) -> None:
     mission = write_mission(tmp_path)
-    argv = ["agent", str(mission), *(args if "--vehicle" in args else ["--vehicle", "0", *args])]
+    argv = ["agent", str(mission), *(args if "--vehicle" in args else ["--vehicle", "1", *args])]
     assert exit_code_of(argv) == 2
     assert reason in one_line(capsys.readouterr().err)
 
