@@ -426,7 +426,7 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is False
     assert summary["mission_t_s"] >= TEAM_END_S
-    # the agents' own blocks (their agent-I.json) merged into the ground's summary, from 1
+    # the agents' own blocks (their agent-N.json) merged into the ground's summary, from 1
     assert set(summary["links"]) == set(summary["agents"]) == {"1", "2", "3"}
     assert all(summary["links"][str(i + 1)]["setpoints"] > 100 for i in range(3))
     assert all(summary["agents"][str(i + 1)]["ticks"] > 100 for i in range(3))
@@ -486,7 +486,7 @@ def test_a_broker_restart_mid_mission_is_survived(team_run: TeamRun) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is False
     assert summary["mission_t_s"] >= TEAM_END_S
-    # the agents' own blocks (their agent-I.json) merged into the ground's summary, from 1
+    # the agents' own blocks (their agent-N.json) merged into the ground's summary, from 1
     assert set(summary["links"]) == set(summary["agents"]) == {"1", "2", "3"}
     assert all(summary["links"][str(i + 1)]["setpoints"] > 100 for i in range(3))
     assert all(summary["agents"][str(i + 1)]["ticks"] > 100 for i in range(3))
@@ -595,7 +595,7 @@ def test_sigterm_to_a_flying_agent_holds_its_vehicle_and_exits_143(
     assert run.hold_beat.custom_mode == HOLD.custom_mode, run.hold_beat
     assert run.ground_code == 130, run.ground.transcript()
 
-    assert "agent 0: stopped by SIGTERM; vehicle 1 in hold" in agent.stdout()
+    assert "agent 1: stopped by SIGTERM; vehicle 1 in hold" in agent.stdout()
     # the agent's hold, not the vehicle's offboard failsafe (which would go to hold too)
     assert "left OFFBOARD on its own" not in agent.stderr(), agent.transcript()
     assert "hold on exit failed" not in agent.stderr(), agent.transcript()
