@@ -15,7 +15,7 @@ from app.adapters.observations_log import ObservationLog, observations_file
 from app.adapters.tlog import TlogRecorder
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
-from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
+from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
 from app.adapters.vehicle.mavsdk.urls import UdpEndpoint, parse_gcs_endpoint, udp_endpoint_of_url
 from app.config.plan import MissionPlan
 from app.core.mission.team import TeamSample
@@ -126,8 +126,10 @@ async def open_links(
         )
         app_urls = list(urls)
         if recorder is not None or gcs is not None:
+            # the relays in a thread of their own, so that no tick of this loop delays a datagram
+            relays = stack.enter_context(RelayThread())
             app_urls = [
-                await _relayed(stack, url, k, vehicles, urls, recorder, gcs, notify)
+                await _relayed(stack, relays, url, k, vehicles, urls, recorder, gcs, notify)
                 for k, url in enumerate(urls)
             ]
         hub = await stack.enter_async_context(
@@ -143,6 +145,7 @@ async def open_links(
 
 async def _relayed(
     stack: AsyncExitStack,
+    relays: RelayThread,
     url: str,
     k: int,
     vehicles: Sequence[int],
@@ -165,13 +168,15 @@ async def _relayed(
     # each connection one vehicle: vehicle i's own ground-station port, and its system id
     one_each = len(urls) == len(vehicles)
     relay = await stack.enter_async_context(
-        MavlinkRelay(
-            endpoint,
-            recorder=recorder,
-            gcs=gcs,
-            gcs_index=vehicles[k] if one_each else k,
-            system_ids=frozenset({vehicles[k] + 1}) if one_each else frozenset(),
-            name=f"relay {url}",
+        relays.hosting(
+            MavlinkRelay(
+                endpoint,
+                recorder=recorder,
+                gcs=gcs,
+                gcs_index=vehicles[k] if one_each else k,
+                system_ids=frozenset({vehicles[k] + 1}) if one_each else frozenset(),
+                name=f"relay {url}",
+            )
         )
     )
     if notify is not None:

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.tlog import TlogRecorder
 from app.adapters.vehicle.mavsdk.packets import TARGET_OFFSETS, split_packets, split_stream
-from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
+from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
 from app.adapters.vehicle.mavsdk.urls import (
     UdpEndpoint,
     parse_gcs_endpoint,
@@ -382,3 +382,40 @@ def read_messages(path) -> list[mavlink.MAVLink_message]:
     while (msg := reader.recv_match()) is not None:
         out.append(msg)
     return out
+
+
+async def test_a_relay_in_its_own_thread_forwards_while_the_mission_loop_is_busy() -> None:
+    """The mission runs its relays in a RelayThread: a datagram from the vehicle reaches the app
+    while the mission's own loop is blocked in a long tick (on that loop it waited the tick
+    out), and the relay closes with the block that hosted it."""
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    app = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        vehicle.bind(("127.0.0.1", 0))
+        app.bind(("127.0.0.1", 0))
+        app.settimeout(2.0)
+        endpoint = udp_endpoint_of_url(f"udpout://127.0.0.1:{vehicle.getsockname()[1]}")
+        assert endpoint is not None
+        with RelayThread() as relays:
+            async with relays.hosting(MavlinkRelay(endpoint, name="threaded")) as relay:
+                app_port = int(relay.app_url.rsplit(":", 1)[1])
+                app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", app_port))
+                _, relay_addr = await asyncio.to_thread(vehicle.recvfrom, 4096)
+                beat = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
+                sent = time.monotonic()
+                vehicle.sendto(beat, relay_addr)
+                # this loop blocked (as in a long tick) while the app waits for the datagram: a
+                # relay on this loop would pass nothing on until the block ends (here: never)
+                data, _ = app.recvfrom(4096)
+                waited_s = time.monotonic() - sent
+            assert data == beat
+            assert waited_s < 0.2
+            assert relay.counters.from_vehicle == 1
+        # closed: its sockets are gone
+        app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", app_port))
+        vehicle.settimeout(0.3)
+        with pytest.raises(TimeoutError):
+            vehicle.recvfrom(4096)
+    finally:
+        vehicle.close()
+        app.close()
