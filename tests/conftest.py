@@ -27,9 +27,10 @@ def mosquitto_fixture(tmp_path: Path) -> Iterator[Mosquitto]:
         broker.stop()
 
 
-# The test command (scripts/test) runs two lanes at once on a multi-core machine: the tests that
-# fly in wall-clock time (simulator over UDP, brokers, processes) at normal priority, and the pure
-# computations (these paths) beside them at a lower priority, so they use only the idle cores.
+# The test command (scripts/test) runs three lanes at once on a multi-core machine: the whole
+# missions (one process flying a team in wall-clock time, or a ground and its agents), one after
+# another; beside them the other wall-clock tests (one vehicle over UDP, brokers), lighter; and the
+# pure computations at a lower priority, so that they use only the idle cores.
 _COMPUTE_LANE = (
     "tests/core/",
     "tests/config/",
@@ -41,6 +42,12 @@ _COMPUTE_LANE = (
     "tests/sitl/test_sitl_geodesy.py",
     "tests/sitl/test_target.py",
 )
+_MISSION_LANE = (
+    "tests/system/",
+    "tests/runtime/test_silent_mission.py",
+    "tests/cli/test_replay.py",
+    "tests/cli/test_install.py",
+)
 _ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -49,3 +56,5 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         where = item.path.resolve().relative_to(_ROOT).as_posix()
         if where.startswith(_COMPUTE_LANE):
             item.add_marker(pytest.mark.compute)
+        elif where.startswith(_MISSION_LANE):
+            item.add_marker(pytest.mark.mission)
