@@ -290,6 +290,7 @@ def _fusion_counters(ground: GroundStation | None) -> dict[str, int] | None:
         "local_estimates_taken": main.received,
         "out_of_order_dropped": main.out_of_order_dropped,
         "stale_basis_dropped": main.stale_basis_dropped,
+        "allocations_ignored": main.allocations_ignored,
     }
 
 

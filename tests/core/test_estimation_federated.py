@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.core.estimation.federated import (
+    ALLOCATION_IGNORED_AFTER_S,
     MainParams,
     MainState,
     apply_feedback,
@@ -267,6 +268,26 @@ def test_an_estimate_built_on_the_last_allocation_replaces_the_copy_and_one_buil
     state = main_receive(state, replace(built, t_s=9.85))
     assert state.out_of_order_dropped == 1
     assert state.stale_basis_dropped == 1
+
+
+def test_a_sender_that_takes_no_allocation_is_fused_all_the_same():
+    """An agent that refuses the allocations (as it refuses a fused estimate far less certain
+    than its own, after a bus outage) keeps sending estimates on its old basis: dropped while
+    the basis is recent, fused once it is ``ALLOCATION_IGNORED_AFTER_S`` old, or the main
+    filter would starve and coast away from the target."""
+    params = MainParams(feedback="mixture")
+    state = main_receive(MainState(), _estimate("a", np.zeros(6), np.eye(6), t=9.8))
+    fused = main_fuse(state, 10.0, params)
+    assert fused is not None
+    state = main_allocate(state, fused, params)
+    moved = np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    recent = replace(_estimate("a", moved, np.eye(6), t=10.5), alloc_t_s=9.0)
+    state = main_receive(state, recent)
+    assert (state.stale_basis_dropped, state.allocations_ignored) == (1, 0)
+    late = replace(recent, t_s=9.0 + ALLOCATION_IGNORED_AFTER_S + 0.1)
+    state = main_receive(state, late)
+    assert (state.stale_basis_dropped, state.allocations_ignored) == (1, 1)
+    assert state.estimate_of("a") == late
 
 
 def test_an_estimate_built_on_the_allocation_before_is_not_counted_twice():

@@ -79,6 +79,12 @@ class MainParams:
             raise ValueError(f"max_age_s must be finite and > 0, got {self.max_age_s}")
 
 
+ALLOCATION_IGNORED_AFTER_S = 3.0
+"""A local estimate whose basis (the allocation its filter last took) is this much older than
+the estimate, while a newer allocation was given to it, comes from a sender that does not take
+the allocations: it is fused all the same (``main_receive``)."""
+
+
 @dataclass(frozen=True, slots=True)
 class MainState:
     """The newest estimate from every local filter, and what was refused."""
@@ -96,6 +102,9 @@ class MainState:
     declare to be fused)."""
     stale_basis_dropped: int = 0
     """Estimates refused because they were built on an older allocation than the last one."""
+    allocations_ignored: int = 0
+    """Estimates fused although built on an older allocation, their sender having taken none
+    for ``ALLOCATION_IGNORED_AFTER_S``."""
 
     def estimate_of(self, sensor: str) -> LocalEstimate | None:
         for est in self.latest:
@@ -130,8 +139,15 @@ def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
     if last is not None and estimate.t_s < last:
         return replace(state, out_of_order_dropped=state.out_of_order_dropped + 1)
     basis = dict(state.allocated_t).get(estimate.sensor)
+    ignored = state.allocations_ignored
     if basis is not None and estimate.alloc_t_s is not None and estimate.alloc_t_s < basis:
-        return replace(state, stale_basis_dropped=state.stale_basis_dropped + 1)
+        if estimate.t_s - estimate.alloc_t_s <= ALLOCATION_IGNORED_AFTER_S:
+            return replace(state, stale_basis_dropped=state.stale_basis_dropped + 1)
+        # its sender has not taken an allocation for that long (it refused them: an agent
+        # does not believe a fused estimate far less certain than its own, as the main
+        # filter's is after a bus outage): its estimates are fused as they are, or the main
+        # filter would starve, coast and drift away from the target for good
+        ignored += 1
     sent[estimate.sensor] = estimate.t_s
     others = tuple(e for e in state.latest if e.sensor != estimate.sensor)
     return replace(
@@ -139,6 +155,7 @@ def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
         latest=(*others, estimate),
         received=state.received + 1,
         received_t=tuple(sorted(sent.items())),
+        allocations_ignored=ignored,
     )
 
 
