@@ -328,6 +328,9 @@ def write_outputs(
         tracking_command_s=plan.config.tracking_command_s,
         radius_tolerance_m=plan.ground.stages.radius_tolerance_m,
         spacing_tolerance_rad=plan.ground.stages.spacing_tolerance_rad,
+        outages=[(o.start_t_s, o.end_t_s, o.reason) for o in ground.outages]
+        if ground is not None
+        else (),
         extra={
             "run": dict(run) if run is not None else None,
             "mission": plan.config.name,

@@ -22,7 +22,14 @@ if TYPE_CHECKING:
     from app.config.estimator import EstimatorConfig
     from app.config.mission import MissionConfig
 
-TRACK_EXTRA_COLUMNS = ("active", "estimate_east_m", "estimate_north_m", "stage", "segment")
+TRACK_EXTRA_COLUMNS = (
+    "active",
+    "estimate_east_m",
+    "estimate_north_m",
+    "stage",
+    "segment",
+    "outage",
+)
 CONFIG_FILE = "config.json"
 TRACK_FILE = "track.csv"
 SUMMARY_FILE = "summary.json"
@@ -40,10 +47,12 @@ def write_run_folder(
     spacing_tolerance_rad: float,
     extra: Mapping[str, Any],
     title: str = "",
+    outages: Sequence[tuple[float, float | None, str]] = (),
 ) -> dict[str, Any]:
     """Score ``samples`` (``summarize``), add ``extra`` (the run's own figures: counters, times),
     write the folder and return the summary. The figures (matplotlib, headed ``title``, else
-    ``run_title``) only when there are samples."""
+    ``run_title``) only when there are samples. ``outages``: (start, end or None, reason) in
+    mission time, marked in track.csv's ``outage`` column (``outage_marks``)."""
     summary = summarize(
         samples, radius_m, tracking_command_s, radius_tolerance_m, spacing_tolerance_rad
     )
@@ -65,9 +74,10 @@ def write_run_folder(
                 *(s.estimate[:2] if s.estimate is not None else (nan, nan)),
                 s.stage,
                 s.target_segment,
+                mark,
             ),
         )
-        for s in samples
+        for s, mark in zip(samples, outage_marks([s.t_s for s in samples], outages), strict=True)
         for v in s.vehicles
     ]
     write_track_csv(out_dir / TRACK_FILE, rows, extra_columns=TRACK_EXTRA_COLUMNS)
@@ -78,6 +88,24 @@ def write_run_folder(
         name = title or run_title(out_dir, mission if isinstance(mission, str) else "")
         plot_mission(samples, radius_m, out_dir, title=name)
     return summary
+
+
+def outage_marks(
+    times_s: Sequence[float], outages: Sequence[tuple[float, float | None, str]]
+) -> list[str]:
+    """Per sample time (ascending), the reason of the outage it borders or falls in ('' for
+    none): the last sample before the outage's start, every sample up to its end (None: to the
+    end of the run) and the first sample after it. The ground's mission time waits for the
+    vehicles' statuses, so an outage leaves a hole in the file: the two marked samples either
+    side of it say where it is."""
+    marks = [""] * len(times_s)
+    for start, end, reason in outages:
+        before = [k for k, t in enumerate(times_s) if t < start]
+        inside = [k for k, t in enumerate(times_s) if t >= start and (end is None or t <= end)]
+        after = [k for k, t in enumerate(times_s) if end is not None and t > end]
+        for k in (*before[-1:], *inside, *after[:1]):
+            marks[k] = marks[k] or reason
+    return marks
 
 
 def run_title(run_dir: Path, mission: str) -> str:

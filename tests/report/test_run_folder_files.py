@@ -175,3 +175,23 @@ def test_plot_refuses_what_is_not_a_run_folder(
     assert "no config.json" in capsys.readouterr().err
     assert main(["plot", str(tmp_path), "--radius-m", "90"]) == 2
     assert "track.csv: no such file" in capsys.readouterr().err
+
+
+def test_outages_are_marked_in_the_track_file_with_the_sample_after_their_hole() -> None:
+    from app.report.run_folder import outage_marks
+
+    times = [1.0, 2.0, 3.0, 3.1, 8.0, 9.0, 20.0, 21.0]
+    outages = [(2.5, 3.05, "every vehicle silent"), (19.5, None, "bus down")]
+    assert outage_marks(times, outages) == [
+        "",
+        "every vehicle silent",  # the last sample before it: the hole starts here
+        "every vehicle silent",  # in the outage
+        "every vehicle silent",  # the first sample after it: the hole ends here
+        "",
+        "bus down",  # before the outage that never ended
+        "bus down",  # ... which marks every sample to the end
+        "bus down",
+    ]
+    # a hole with no sample in it: the samples either side of it
+    assert outage_marks([1.0, 2.0, 9.0, 10.0], [(3.0, 8.0, "x")]) == ["", "x", "x", ""]
+    assert outage_marks(times, []) == [""] * len(times)

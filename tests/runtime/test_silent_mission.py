@@ -4,6 +4,7 @@ that says why (issue #14 item 5), on the built-in simulator in this process."""
 from __future__ import annotations
 
 import asyncio
+import csv
 import json
 import time
 from pathlib import Path
@@ -53,5 +54,12 @@ async def test_a_mission_whose_vehicles_all_fall_silent_ends_within_60_s(tmp_pat
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert "every vehicle silent" in summary["ground"]["end_reason"]
     assert summary["ground"]["outages"][0]["start_t_s"] >= SILENCED_AT_S
-    assert (tmp_path / "track.csv").exists()
+    with (tmp_path / "track.csv").open(encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    # the outage is marked in the track file (from the sample before its start on), and no
+    # sample well before it
+    reason = summary["ground"]["outages"][0]["reason"]
+    assert reason
+    assert rows[-1]["outage"] == reason
+    assert not any(r["outage"] for r in rows if float(r["t_s"]) < SILENCED_AT_S - 1.0)
     assert result.summary["mission_t_s"] < plan.end_t_s
