@@ -271,7 +271,7 @@ def run_samples(run_dir: Path, plan: MissionPlan) -> list[TeamSample]:
                 None,
                 tuple(
                     VehicleSample(
-                        int(r["vehicle"]),
+                        int(r["vehicle"]) - 1,  # track.csv numbers them from 1
                         float(r["active"]) > 0.5,
                         float(r["east_m"]),
                         float(r["north_m"]),

@@ -22,7 +22,7 @@ One JSON object a line, in the order the mission's loops consumed them (``InputR
 - ``{"kind": "local", "vehicle": i, "t_s", "clock_t_s"}``: the ground took agent ``i``'s local
   estimate of ``t_s``.
 
-``vehicle`` is the vehicle's index (0-based, as ``track.csv``'s column; its MAVLink system id
+``vehicle`` is the vehicle's index (0-based, as the bus messages carry it; its MAVLink system id
 and the number users see is ``vehicle + 1``). Times are mission seconds; positions m
 east/north of the mission origin; courses rad clockwise from north. Numbers are written in
 full (``repr``), so a replay is fed exactly what the run was. A write that fails is logged

@@ -62,7 +62,7 @@ def write_run_folder(
     rows = [
         TrackRow(
             s.t_s,
-            v.vehicle,
+            v.vehicle + 1,  # numbered as users read them: the MAVLink system id
             v.east_m,
             v.north_m,
             v.course_rad,
@@ -209,7 +209,7 @@ def read_track_samples(path: Path) -> list[TeamSample]:
                 estimate = (e, n, 0.0, 0.0)
         vehicles = tuple(
             VehicleSample(
-                int(_float(row, "vehicle", path, ln)),
+                int(_float(row, "vehicle", path, ln)) - 1,  # the file numbers them from 1
                 _float(row, "active", path, ln) > 0.5 if "active" in row else True,
                 _float(row, "east_m", path, ln),
                 _float(row, "north_m", path, ln),

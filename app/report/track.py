@@ -103,7 +103,7 @@ def simulation_track_rows(result: SimulationResult, every_s: float = 0.1) -> lis
             rows.append(
                 TrackRow(
                     float(result.t_s[j]),
-                    i,
+                    i + 1,  # numbered as users read them (as the plots and the tlogs)
                     float(result.east_m[j, i]),
                     float(result.north_m[j, i]),
                     float(result.course_rad[j, i]),

@@ -517,7 +517,7 @@ async def test_track_csv_has_a_stage_column_through_gather_adjust_track(full_run
     assert {"gather", "adjust", "track"} <= set(stages)
     order = list(dict.fromkeys(stages))
     assert order == [s for s in ("standby", "gather", "adjust", "track") if s in order]
-    assert {r["vehicle"] for r in rows} == {"0", "1", "2"}
+    assert {r["vehicle"] for r in rows} == {"1", "2", "3"}
     assert len(rows) == sum(len(s.vehicles) for s in full_run.result.samples)
 
 

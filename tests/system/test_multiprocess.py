@@ -229,7 +229,7 @@ class TrackRow:
         estimate = float(row["estimate_east_m"]), float(row["estimate_north_m"])
         return cls(
             t_s=float(row["t_s"]),
-            vehicle=int(row["vehicle"]),
+            vehicle=int(row["vehicle"]) - 1,  # track.csv numbers them from 1, as users do
             active=float(row["active"]) > 0.5,
             target_north_m=target[1],
             distance_m=math.dist(here, target),
