@@ -1,7 +1,7 @@
 """The attacks of issue #14, each during the track stage of a live mission over a real mosquitto.
 
     python -m benchmarks.bench_attacks [CONFIG] [--only NAME ...] [--seconds S] [--rate HZ]
-                                       [--speedup X] [--out DIR]
+                                       [--speedup X] [--out DIR] [--mission-key]
 
 Flies CONFIG (default ``test-short``: three vehicles, about 60 s of wall time at 2x) on the
 built-in simulator, composed in this process (``Mission``) with its bus on a mosquitto started
@@ -15,6 +15,10 @@ stamped 1e5 s ahead, ``command/all`` hold claiming to be the ground, ``t_s`` 1e3
 observations, one-model ``estimate.local``, ``estimate.global`` with x = 1e200, the nesting bomb
 retained on the mission topic, a garbage flood (100 KB of numbers a message), and a burst of 40
 fake camera fixes 10 km away in 0.2 s into vehicle 1's MAVLink port, once a second.
+
+With ``--mission-key`` the team seals its messages with a per-mission key the intruder does not
+hold ([bus] mission_key_file, docs/bus.md): every forged message is then dropped unread (the
+``command-hold`` attack, which nothing else can refuse on a broker without logins).
 
 Prints per attack what it sent, whether the mission completed, how many times a vehicle left the
 formation, the track stage's RMS distance error against the clean run's (ratio), the fused
@@ -41,6 +45,7 @@ import paho.mqtt.publish
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.bus import MqttBus
+from app.adapters.bus.signing import MissionKey
 from app.compose.mission import Mission
 from app.compose.parts import MissionResult
 from app.config import load_config
@@ -265,7 +270,15 @@ async def fly(
     config: MissionConfig, broker: Mosquitto, out: Path, name: str | None, args: argparse.Namespace
 ) -> dict[str, Any]:
     sim = config.sim.model_copy(update={"speedup": args.speedup})
-    plan = build_plan(config.model_copy(update={"bus": broker.url, "sim": sim}))
+    update: dict[str, Any] = {"bus": broker.url, "sim": sim}
+    if args.mission_key:
+        key_file = out.parent / "mission.key"
+        key_file.parent.mkdir(parents=True, exist_ok=True)
+        key_file.write_text(MissionKey.generate().hex() + "\n", encoding="ascii")
+        update["bus_login"] = config.bus_login.model_copy(
+            update={"mission_key_file": str(key_file)}
+        )
+    plan = build_plan(config.model_copy(update=update))
     base_port = find_free_udp_base_port(plan.count)
     sent = 0
     async with (
@@ -366,6 +379,12 @@ def main() -> None:
     parser.add_argument("--out", help="keep the run folders here (default: a temporary one)")
     parser.add_argument(
         "--speedup", type=float, default=2.0, help="simulator speed-up (default 2: one process)"
+    )
+    parser.add_argument(
+        "--mission-key",
+        action="store_true",
+        help="the team seals its messages with a mission key ([bus] mission_key_file) that the "
+        "intruder does not hold",
     )
     asyncio.run(main_async(parser.parse_args()))
 

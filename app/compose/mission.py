@@ -19,6 +19,7 @@ from contextlib import AsyncExitStack
 from pathlib import Path
 
 from app.adapters.bus import BrokerUrl, InProcessBroker, Will, open_bus
+from app.adapters.bus.signing import MissionKey
 from app.adapters.eventlog import EventLog
 from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.compose.parts import (
@@ -188,10 +189,20 @@ class Mission:
                     name=f"prepare-{link.vehicle_id}",
                 )
         broker = InProcessBroker() if self.broker_url is None else None
+        # [bus] mission_key_file: every part seals what it sends and takes only what is sealed
+        # (one shared key, as in the multi-process mode; the logins are that mode's)
+        key_file = cfg.bus_login.mission_key_file
+        mission_key = MissionKey.load(key_file) if key_file is not None else None
 
         async def client(name: str, will: Will | None = None) -> Bus:
             bus = await stack.enter_async_context(
-                open_bus(self.broker_url, client_id=name, will=will, broker=broker)
+                open_bus(
+                    self.broker_url,
+                    client_id=name,
+                    will=will,
+                    broker=broker,
+                    mission_key=mission_key,
+                )
             )
             self.buses.append(bus)
             return bus
