@@ -295,7 +295,7 @@ class VehicleAgent:
         """The ground station went silent for too long: the vehicle holds (the rule of
         ``MissionAgentParams.ground_silent_hold_s``) until a ``resume``."""
         self.counters.ground_silent_holds += 1
-        log.warning("agent %d: the ground station is silent: holding", self.params.vehicle)
+        log.warning("agent %d: the ground station is silent: holding", self.params.vehicle + 1)
         if self._pilot_mode is None:
             try:
                 await self._link.hold()
@@ -311,7 +311,7 @@ class VehicleAgent:
         if not _log_spaced(n):
             return
         detail = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else error
-        log.warning("agent %d: %s (%d so far): %s", self.params.vehicle, kind, n, detail)
+        log.warning("agent %d: %s (%d so far): %s", self.params.vehicle + 1, kind, n, detail)
         self._events.emit(
             kind, t, vehicle=self.params.vehicle, count=n, repeat=n > 1, detail=str(detail)[:300]
         )
@@ -385,12 +385,11 @@ class VehicleAgent:
         self.counters.pilot_takeovers += 1
         v = self.params.vehicle
         log.warning(
-            "vehicle %d (system id %d) was put in %s by someone else: the mission leaves it "
-            "there and sends it nothing until 'resume %d'",
-            v,
+            "vehicle %d was put in %s by someone else: the mission leaves it there and sends "
+            "it nothing until 'resume %d'",
             v + 1,
             mode,
-            v,
+            v + 1,
         )
         self._events.emit("pilot_took_over", t, vehicle=v, flight_mode=mode)
 
