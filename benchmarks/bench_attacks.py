@@ -257,6 +257,7 @@ def refused_counts(mission: Mission, summary: dict[str, Any]) -> dict[str, int]:
         "commands_nonfinite",
         "fixes_rate_limited",
         "observations_dropped",
+        "fused_unread",
     ):
         out[f"agents.{key}"] = sum(int(a.get(key, 0)) for a in agents.values())
     for client in mission.buses:

@@ -110,6 +110,7 @@ class AgentCounters:
     commands_nonfinite: int = 0  # commands with a non-finite value: the tick sent nothing
     fixes_rate_limited: int = 0  # camera fixes over the link's rate limit, dropped
     ground_silent_holds: int = 0  # holds because the ground station went silent
+    fused_unread: int = 0  # fused estimates pushed out unread by a newer one (one-deep queue)
 
 
 class _FixBucket:
@@ -220,16 +221,20 @@ class VehicleAgent:
             self._bus.subscribe(topics.MISSION) as mission,
             self._bus.subscribe(topics.ALL_STATUS) as statuses,
             self._bus.subscribe(topics.ALL_COMMANDS) as commands,
-            asyncio.TaskGroup() as tg,
         ):
-            tg.create_task(self._control(), name=f"{self.name}-control")
-            tg.create_task(self._camera(), name=f"{self.name}-camera")
-            tg.create_task(self._link_events(), name=f"{self.name}-link-events")
-            tg.create_task(self._hear(observations), name=f"{self.name}-observations")
-            tg.create_task(self._hear(fused), name=f"{self.name}-fused")
-            tg.create_task(self._hear(mission), name=f"{self.name}-mission")
-            tg.create_task(self._hear(statuses), name=f"{self.name}-team")
-            tg.create_task(self._hear(commands), name=f"{self.name}-commands")
+            try:
+                async with asyncio.TaskGroup() as tg:
+                    tg.create_task(self._control(), name=f"{self.name}-control")
+                    tg.create_task(self._camera(), name=f"{self.name}-camera")
+                    tg.create_task(self._link_events(), name=f"{self.name}-link-events")
+                    tg.create_task(self._hear(observations), name=f"{self.name}-observations")
+                    tg.create_task(self._hear(fused), name=f"{self.name}-fused")
+                    tg.create_task(self._hear(mission), name=f"{self.name}-mission")
+                    tg.create_task(self._hear(statuses), name=f"{self.name}-team")
+                    tg.create_task(self._hear(commands), name=f"{self.name}-commands")
+            finally:
+                # every fused estimate is either applied, refused (messages_refused) or this
+                self.counters.fused_unread = fused.dropped
 
     # --- the control path -----------------------------------------------------------------
 

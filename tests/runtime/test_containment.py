@@ -196,6 +196,37 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
     assert agent.counters.tick_errors == agent.counters.message_errors == 0
 
 
+async def test_every_fused_estimate_is_refused_or_counted_unread() -> None:
+    """A burst of forged fused estimates: the agent reads only the newest (a one-deep queue), so
+    each one is either refused when read or counted as pushed out unread, none lost."""
+    plan = build_plan(load_config("test-short", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    burst = 20
+    async with (
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id="ground") as ground,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
+        async with asyncio.TaskGroup() as tg:
+            task = tg.create_task(agent.run())
+            await asyncio.sleep(0.01)
+            link.put(frame(1.0, 90.0, 0.0))
+            await until(lambda: agent.counters.ticks == 1)
+            bomb = bus.GlobalEstimate(
+                sender="ground", t_s=1.0, x=(1e200, 0.0, 0.0, 0.0, 0.0, 0.0), P=EYE, beta={}
+            )
+            await asyncio.gather(
+                *(ground.publish(topics.GLOBAL_ESTIMATE, bomb) for _ in range(burst))
+            )
+            await until(lambda: agent.counters.messages_refused >= 1)
+            await asyncio.sleep(0.05)
+            task.cancel()
+    assert agent.counters.fused_unread > 0
+    assert agent.counters.messages_refused + agent.counters.fused_unread == burst
+    assert agent.state.fused is None
+
+
 async def test_the_grounds_bus_drops_are_in_its_report() -> None:
     plan = build_plan(load_config("test-short", MissionConfig))
     broker = InProcessBroker()

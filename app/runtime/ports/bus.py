@@ -14,6 +14,9 @@ from app.runtime.ports.topics import Topic, TopicFilter
 class Subscription(Protocol):
     """The messages on one topic filter: enter it, then ``async for topic, message in it``."""
 
+    dropped: int
+    """Messages pushed out of its full queue by newer ones, never read."""
+
     async def __aenter__(self) -> Self: ...
 
     async def __aexit__(
