@@ -50,7 +50,14 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from app.core.frames import wrap_pi
 from sitl.config import SimConfig, VehicleConfig
-from sitl.guidance import Command, CourseCommand, LoiterCommand, VelocityCommand, guide
+from sitl.guidance import (
+    Command,
+    CourseCommand,
+    LoiterCommand,
+    VelocityCommand,
+    guide,
+    heading_for_ground_course,
+)
 from sitl.telemetry import GRAVITY_M_S2
 from sitl.vehicle import (
     ARM_DISARM_FORCE,
@@ -282,23 +289,6 @@ def mode_by_number(number: int) -> ArduPlaneMode | None:
     if number in _NAMED:
         return _NAMED[number]
     return _plane_mode(number) if number in _OTHER_MODES else None
-
-
-def heading_for_ground_course(
-    course_rad: float, airspeed_m_s: float, wind_east_m_s: float, wind_north_m_s: float
-) -> float:
-    """The heading through the air whose ground track is ``course_rad`` in the wind.
-
-    The wind's component across the course is cancelled: sin(heading - course) = -w_cross / V.
-    A cross wind the airspeed cannot cancel (|w_cross| >= V) is turned into as far as it can be
-    (90 degrees), the best the aircraft can do.
-    """
-    if airspeed_m_s <= 0.0:
-        return course_rad
-    right_e, right_n = math.cos(course_rad), -math.sin(course_rad)  # unit vector to the right
-    cross = wind_east_m_s * right_e + wind_north_m_s * right_n
-    ratio = max(-1.0, min(1.0, -cross / airspeed_m_s))
-    return wrap_pi(course_rad + math.asin(ratio))
 
 
 class ArduPlaneAutopilot:

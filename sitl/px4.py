@@ -45,7 +45,14 @@ from pymavlink.dialects.v20 import common as mavlink
 from app.core.frames import wrap_pi
 from sitl import telemetry
 from sitl.config import SimConfig
-from sitl.guidance import Command, LineCommand, LoiterCommand, VelocityCommand, guide
+from sitl.guidance import (
+    Command,
+    LineCommand,
+    LoiterCommand,
+    VelocityCommand,
+    guide,
+    heading_for_ground_course,
+)
 from sitl.vehicle import (
     ARM_DISARM_FORCE,
     AUTOPILOT_COMPONENT,
@@ -192,12 +199,18 @@ class Px4Autopilot:
         )
 
     def fly(self, v: SimVehicle, dt_s: float) -> None:
-        """One physics step in the air, flying the current command."""
+        """One physics step in the air, flying the current command. The path (line, loiter,
+        velocity) is followed over the ground: NPFG flies the air-relative bearing that holds
+        the path's ground course in the wind its EKF estimates (here: the wind that blows),
+        so a cross wind costs a crab angle, not a cross-track offset."""
         if v.mode is OFFBOARD and self.offboard_setpoint is not None:
             v.command = self._offboard_command(self.offboard_setpoint)
         limits = v.config.limits
         course_cmd, speed_cmd = guide(v.state, v.command or v.hold_here(), limits.course_gain_per_s)
-        v.step(course_cmd, speed_cmd, limits, dt_s)
+        heading_cmd = heading_for_ground_course(
+            course_cmd, v.state.speed_m_s, v.wind_east_m_s, v.wind_north_m_s
+        )
+        v.step(heading_cmd, speed_cmd, limits, dt_s)
 
     def _offboard_command(self, setpoint: Command) -> Command:
         """A position (+velocity) setpoint flown at FW_AIRSPD_TRIM (cruising_speed NaN)."""
