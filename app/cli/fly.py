@@ -217,6 +217,25 @@ def _falling_behind(summary: dict[str, object]) -> str | None:
     )
 
 
+def _cpu_line(summary: dict[str, object]) -> str:
+    """The CPU the run took per vehicle, as a share of one core at 1x real time."""
+    cpu = summary.get("cpu")
+    if not isinstance(cpu, dict):
+        return ""
+    share = cpu.get("per_vehicle_at_1x") or {}
+
+    def pct(key: str) -> str:
+        value = share.get(key)
+        return "-" if not isinstance(value, float) else f"{100.0 * value:.2f} %"
+
+    return (
+        "CPU per vehicle at 1x real time (of one core): agents' own work "
+        f"{pct('agents')}, this process {pct('process')}"
+        f" (ground, agents, links, relays), with the simulator and mavsdk_server"
+        f" {pct('with_children')}"
+    )
+
+
 def report(summary: dict[str, object]) -> str:
     """The run's headline figures, a few lines for the terminal (the full set: summary.json)."""
     conv = summary.get("convergence")
@@ -233,6 +252,9 @@ def report(summary: dict[str, object]) -> str:
     behind = _falling_behind(summary)
     if behind:
         lines.append(behind)
+    cpu = _cpu_line(summary)
+    if cpu:
+        lines.append(cpu)
     parts = summary.get("parts")
     if isinstance(parts, dict):
         for key, part in parts.items():

@@ -23,6 +23,7 @@ from app.adapters.bus.signing import MissionKey
 from app.adapters.eventlog import EventLog
 from app.adapters.vehicle.mavsdk.urls import validate_url
 from app.compose.parts import (
+    CpuMeter,
     MissionResult,
     bring_up,
     clock_rate,
@@ -111,6 +112,7 @@ class Mission:
     async def run(self) -> MissionResult:
         """Fly the plan to its end; write and return the run's results (also when interrupted)."""
         wall_start = self._clock.monotonic_s()
+        cpu = CpuMeter.start()
         run = run_block(
             self.plan.config,
             started_epoch_s=self._clock.time_s(),
@@ -124,6 +126,7 @@ class Mission:
         finally:
             # every vehicle is in hold and every log closed by now; write the run folder
             wall_s = self._clock.monotonic_s() - wall_start
+            agents_cpu_s = sum(a.counters.cpu_s for a in self.agents)
             result = write_outputs(
                 self.plan,
                 self.out_dir,
@@ -134,6 +137,9 @@ class Mission:
                 self.interrupted,
                 self.agents,
                 run=run,
+                cpu=cpu.block(
+                    wall_s, clock_rate(self.plan, self.builtin), self.plan.count, agents_cpu_s
+                ),
             )
         return result
 

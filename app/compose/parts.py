@@ -4,6 +4,8 @@ vehicle links, the ground station, the agents, their logs, and the run folder at
 import dataclasses
 import logging
 import math
+import resource
+import time
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass, field
@@ -294,6 +296,48 @@ def _fusion_counters(ground: GroundStation | None) -> dict[str, int] | None:
     }
 
 
+@dataclass(frozen=True, slots=True)
+class CpuMeter:
+    """The CPU this process and its finished child processes (the simulator, each vehicle's
+    mavsdk_server) have used since ``start``: the whole app's share of the machine."""
+
+    process_s: float
+    children_s: float
+
+    @classmethod
+    def start(cls) -> "CpuMeter":
+        return cls(time.process_time(), _children_cpu_s())
+
+    def block(
+        self, wall_s: float, rate: float, vehicles: int, agents_cpu_s: float
+    ) -> dict[str, Any]:
+        """The ``cpu`` block of the summary: seconds used, and per vehicle the share of one
+        core at 1x real time (``rate``: vehicle seconds per wall second, the speed-up)."""
+        process = time.process_time() - self.process_s
+        children = _children_cpu_s() - self.children_s
+        vehicle_s = wall_s * rate * max(vehicles, 1)
+
+        def share(cpu_s: float) -> float | None:
+            return cpu_s / vehicle_s if vehicle_s > 0.0 else None
+
+        return {
+            "process_s": process,
+            "children_s": children,
+            "agents_s": agents_cpu_s,
+            "speedup": rate,
+            "per_vehicle_at_1x": {
+                "agents": share(agents_cpu_s),
+                "process": share(process),
+                "with_children": share(process + children),
+            },
+        }
+
+
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def write_outputs(
     plan: MissionPlan,
     out_dir: Path,
@@ -306,11 +350,13 @@ def write_outputs(
     *,
     run: Mapping[str, Any] | None = None,
     remote: Mapping[int, Mapping[str, Any]] | None = None,
+    cpu: Mapping[str, Any] | None = None,
 ) -> MissionResult:
     """The run folder (``write_run_folder``) from what the ground recorded and the parts
     counted. ``run``: how the run was made (``app.report.provenance.run_block``); ``remote``:
     per vehicle, the ``link`` and ``agent`` counters of agents in other processes (their
-    ``agent-N.json``), merged in beside this process's own. Vehicles are keyed from 1."""
+    ``agent-N.json``), merged in beside this process's own; ``cpu``: ``CpuMeter.block``.
+    Vehicles are keyed from 1."""
     remote = remote or {}
     link_counters = {i: c for i, link in links.items() if (c := counters_of(link)) is not None}
     agent_counters = {a.params.vehicle: dataclasses.asdict(a.counters) for a in agents}
@@ -338,6 +384,7 @@ def write_outputs(
             "end_t_s": plan.end_t_s,
             "mission_t_s": mission_t if math.isfinite(mission_t) else None,
             "wall_s": wall_s,
+            "cpu": dict(cpu) if cpu is not None else None,
             "interrupted": interrupted,
             "events": dict(eventlog.counts),
             "links": {vehicle_key(i): c for i, c in sorted(link_counters.items())},

@@ -20,6 +20,7 @@ arrives while an older one waits replaces it (``FUSED_QUEUE``).
 import asyncio
 import logging
 import math
+import time
 from dataclasses import dataclass, replace
 
 from app.core.agent import (
@@ -111,6 +112,11 @@ class AgentCounters:
     fixes_rate_limited: int = 0  # camera fixes over the link's rate limit, dropped
     ground_silent_holds: int = 0  # holds because the ground station went silent
     fused_unread: int = 0  # fused estimates pushed out unread by a newer one (one-deep queue)
+    cpu_s: float = 0.0  # CPU (this thread's) spent in the agent's own work: every mission step
+    wall_s: float = 0.0  # wall time the agent ran
+    #: ``cpu_s`` per second of vehicle time: the share of one core the agent's work takes at
+    #: 1x real time (at a speed-up the same work is done in less wall time); None before it ran
+    cpu_share_at_1x: float | None = None
 
 
 class _FixBucket:
@@ -211,10 +217,32 @@ class VehicleAgent:
 
     def stand_down(self) -> None:
         """Stop commanding the vehicle (the mission is about to put it in hold)."""
-        self.state, _ = logic.step(self.state, logic.Hold(True), self.params)
+        self.state, _ = self._step(logic.Hold(True), self.params)
+
+    def _step(
+        self, event: logic.AgentInput, params: logic.MissionAgentParams
+    ) -> tuple[logic.MissionAgentState, logic.AgentOutbox]:
+        """``logic.step``, its CPU time counted (``cpu_s``): the agent's own work, apart from
+        the bus, the link and the other agents sharing the process."""
+        started = time.thread_time()
+        try:
+            return logic.step(self.state, event, params)
+        finally:
+            self.counters.cpu_s += time.thread_time() - started
 
     async def run(self) -> None:
         v = self.params.vehicle
+        started = time.monotonic()
+        try:
+            await self._run(v)
+        finally:
+            c = self.counters
+            c.wall_s = time.monotonic() - started
+            rate = self._runtime.clock_rate
+            if c.wall_s > 0.0 and rate > 0.0:
+                c.cpu_share_at_1x = c.cpu_s / (c.wall_s * rate)
+
+    async def _run(self, v: int) -> None:
         async with (
             self._bus.subscribe(topics.observation(v)) as observations,
             self._bus.subscribe(topics.GLOBAL_ESTIMATE, queue_size=FUSED_QUEUE) as fused,
@@ -263,7 +291,7 @@ class VehicleAgent:
         own = OwnTelemetry(frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s)
         self._frame_wait(frame)
         try:
-            self.state, out = logic.step(self.state, logic.Control(t, own), self.params)
+            self.state, out = self._step(logic.Control(t, own), self.params)
         except ValueError as exc:  # a non-finite frame: never steer on it
             self._events.emit("telemetry_rejected", t, vehicle=self.params.vehicle, reason=str(exc))
             return
@@ -292,7 +320,7 @@ class VehicleAgent:
                         course_rate_rad_s=self._feed_forward(rate),
                     ),
                 )
-        self.state, out = logic.step(self.state, logic.Telemetry(t, own), self.params)
+        self.state, out = self._step(logic.Telemetry(t, own), self.params)
         if out.status is not None:
             await self._publish_status(out.status)
 
@@ -492,7 +520,7 @@ class VehicleAgent:
         it was used."""
         if self._recorder is not None:
             self._recorder.observation(self.params.vehicle, obs, self.state.now_t_s)
-        self.state, out = logic.step(self.state, logic.Observed(obs), self.params)
+        self.state, out = self._step(logic.Observed(obs), self.params)
         report = out.report
         if report is not None and not report.used:
             self.counters.observations_dropped += 1
@@ -531,10 +559,10 @@ class VehicleAgent:
                     self._recorder.fused(
                         self.params.vehicle, heard.estimate.t_s, self.state.now_t_s
                     )
-                self.state, out = logic.step(self.state, heard, self.params)
+                self.state, out = self._step(heard, self.params)
             case bus.MissionState():
                 mission = logic.HeardMission(message.stage, message.active, message.t_s)
-                self.state, out = logic.step(self.state, mission, self.params)
+                self.state, out = self._step(mission, self.params)
                 if out.stage is not None:
                     self._events.emit(
                         "agent_stage",
@@ -551,7 +579,7 @@ class VehicleAgent:
                     message.speed_m_s,
                 )
                 teammate = logic.HeardTeammate(message.vehicle, fix)
-                self.state, out = logic.step(self.state, teammate, self.params)
+                self.state, out = self._step(teammate, self.params)
             case bus.Command() if (
                 message.vehicles is None or self.params.vehicle in message.vehicles
             ):
@@ -571,13 +599,13 @@ class VehicleAgent:
         self._events.emit("command", t, vehicle=self.params.vehicle, command=message.command)
         try:
             if message.command in ("hold", "shutdown"):
-                self.state, _ = logic.step(self.state, logic.Hold(True), self.params)
+                self.state, _ = self._step(logic.Hold(True), self.params)
                 if self._pilot_mode is None:  # a vehicle the pilot has stays in their mode
                     await self._link.hold()
             elif message.command == "resume" and self._pilot_mode is not None:
                 await self._take_back(t)
             elif message.command == "resume" and self.state.holding:
-                self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
+                self.state, _ = self._step(logic.Hold(False), self.params)
                 latest = self._link.latest
                 course = latest.course_rad if latest is not None else 0.0
                 await self._link.start_offboard(
@@ -601,7 +629,7 @@ class VehicleAgent:
         )
         mode, self._pilot_mode = self._pilot_mode, None
         if self.state.holding:  # a hold asked for meanwhile is over too
-            self.state, _ = logic.step(self.state, logic.Hold(False), self.params)
+            self.state, _ = self._step(logic.Hold(False), self.params)
         self.counters.offboard_restarts += 1
         # stamped like pilot_took_over: the vehicle's newest frame (the loop may lag behind it)
         t = max(t, latest.t_s) if latest is not None else t

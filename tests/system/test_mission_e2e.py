@@ -35,6 +35,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.bus import InProcessBus, encode
+from app.cli.fly import report as fly_report
 from app.compose.mission import Mission
 from app.compose.parts import MissionResult
 from app.config import load_config
@@ -761,3 +762,29 @@ async def test_ctrl_c_holds_every_vehicle_closes_the_logs_and_marks_the_summary(
     assert summary["events"]["interrupted"] == 1
     assert "mission_complete" not in summary["events"]
     assert (tmp_path / "track.csv").exists()
+
+
+async def test_the_summary_counts_the_cpu_each_agent_and_the_run_took(full_run: FullRun) -> None:
+    summary = full_run.result.summary
+    agents = summary["agents"]
+    assert set(agents) == {"1", "2", "3"}
+    for key, agent in agents.items():
+        # every agent did work and ran about as long as the run
+        assert agent["cpu_s"] > 0.0, key
+        assert 0.5 * summary["wall_s"] < agent["wall_s"] <= summary["wall_s"], key
+        share = agent["cpu_share_at_1x"]
+        rate = summary["run"]["speedup"]
+        assert share == pytest.approx(agent["cpu_s"] / (agent["wall_s"] * rate)), key
+        assert 0.0 < share < 0.5, key
+    cpu = summary["cpu"]
+    assert cpu["agents_s"] == pytest.approx(sum(a["cpu_s"] for a in agents.values()))
+    # the agents' steps are part of what this process spent; the children add to it
+    assert cpu["process_s"] > cpu["agents_s"]
+    assert cpu["children_s"] >= 0.0
+    per = cpu["per_vehicle_at_1x"]
+    assert 0.0 < per["agents"] < per["process"] <= per["with_children"]
+    assert per["process"] == pytest.approx(
+        cpu["process_s"] / (summary["wall_s"] * cpu["speedup"] * 3)
+    )
+    line = fly_report(summary)
+    assert f"agents' own work {100.0 * per['agents']:.2f} %" in line
