@@ -45,7 +45,11 @@ class MissionGuidanceConfig(GuidanceConfig):
     simulator were measured to take (docs/guidance.md); set it for a slower link.
     ``course_loop_identification``: identify each vehicle's course loop (gain k, delay) in
     flight and fly it (``fly``), only report it in the event log (``report``), or assume the
-    envelope's k (``off``); ``app.core.guidance.course_id``."""
+    envelope's k (``off``); ``app.core.guidance.course_id``.
+    ``wind``: fit the wind from each vehicle's ground velocity and airspeed and command the
+    airspeed that flies the guidance's ground speed in it (``estimate``), or command the ground
+    speed as the airspeed (``off``, the paper's still-air assumption);
+    ``app.core.guidance.wind``."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
@@ -53,6 +57,7 @@ class MissionGuidanceConfig(GuidanceConfig):
     latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
     course_loop_identification: Literal["fly", "report", "off"] = "fly"
+    wind: Literal["estimate", "off"] = "estimate"
 
 
 class MissionPhaseConfig(PhaseConfig):

@@ -14,6 +14,7 @@ from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
 from app.core.agent import ActuatorChoice, AgentParams, GuidanceParams, PhaseParams
 from app.core.guidance import course_id
+from app.core.guidance.wind import WindParams
 from app.core.mission.agent import MissionAgentParams
 from app.core.mission.ground import GroundParams
 from app.core.mission.stage import StageParams
@@ -100,6 +101,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                     else course_id.params_for(envelope)
                 ),
                 fly_identified=g.course_loop_identification == "fly",
+                wind=WindParams() if g.wind == "estimate" else None,
             )
             for i in range(n)
         )

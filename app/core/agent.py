@@ -225,12 +225,14 @@ class AgentParams:
 @dataclass(frozen=True, slots=True)
 class OwnTelemetry:
     """The vehicle's own state: metres east/north of the origin, course (rad, clockwise from
-    north), ground speed m/s."""
+    north), ground speed m/s; the autopilot's airspeed m/s where it reports one (the wind
+    estimate's input, ``guidance.wind``)."""
 
     east_m: float
     north_m: float
     course_rad: float
     speed_m_s: float
+    airspeed_m_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,7 +290,9 @@ class Command:
     ``course_rad`` (clockwise from north) is lag-compensated for the eq. (2) loop;
     ``field_course_rad`` is the uncompensated desired ground course and
     ``course_rate_ff_rad_s`` its rate along the vehicle's motion (for adapters that take a rate).
-    ``speed_m_s`` is the ground-speed command within the envelope.
+    ``speed_m_s`` is the ground-speed command within the envelope; ``airspeed_m_s``, when the
+    wind is known (``guidance.wind``), the airspeed that flies it there, within the airframe's
+    limits: what an autopilot whose speed setpoint is an airspeed is to be given.
     ``actuator`` is the phase actuator that acted and ``radius_m`` the radius the field was
     flown around (r_d, or the radius actuator's r_eff; 0: not stated).
     """
@@ -301,6 +305,7 @@ class Command:
     inverse: bool
     actuator: PhaseActuator = "speed"
     radius_m: float = 0.0
+    airspeed_m_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

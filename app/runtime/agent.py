@@ -288,7 +288,13 @@ class VehicleAgent:
             return
         self._last_t = t
         self._watch_load(t)
-        own = OwnTelemetry(frame.east_m, frame.north_m, frame.course_rad, frame.ground_speed_m_s)
+        own = OwnTelemetry(
+            frame.east_m,
+            frame.north_m,
+            frame.course_rad,
+            frame.ground_speed_m_s,
+            frame.airspeed_m_s,
+        )
         self._frame_wait(frame)
         try:
             self.state, out = self._step(logic.Control(t, own), self.params)
@@ -305,7 +311,9 @@ class VehicleAgent:
         if out.command is not None and self._pilot_mode is None:
             c = out.command
             rate = c.course_rate_ff_rad_s
-            if not all(math.isfinite(v) for v in (c.course_rad, c.speed_m_s, rate)):
+            # the airspeed that flies the ground speed in the estimated wind, where known
+            speed = c.speed_m_s if c.airspeed_m_s is None else c.airspeed_m_s
+            if not all(math.isfinite(v) for v in (c.course_rad, speed, rate)):
                 self.counters.commands_nonfinite += 1
                 self._fault(
                     "command_nonfinite", t, f"course {c.course_rad!r}, speed {c.speed_m_s!r}"
@@ -315,7 +323,7 @@ class VehicleAgent:
                     t,
                     CourseSpeedCommand(
                         c.course_rad,
-                        c.speed_m_s,
+                        speed,
                         self._runtime.altitude_m,
                         course_rate_rad_s=self._feed_forward(rate),
                     ),

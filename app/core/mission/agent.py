@@ -52,6 +52,7 @@ from app.core.estimation.local import LocalParams, LocalState, StepReport, local
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.core.estimation.models import MotionModel
 from app.core.guidance import course_id as cid
+from app.core.guidance import wind as wind_fit
 from app.core.mission.schedule import Every
 from app.core.mission.stage import Stage
 from app.core.mission.team import dead_reckon
@@ -141,6 +142,7 @@ class MissionAgentParams:
     max_ahead_s: float = 5.0
     fused_gate_nis: float = 50.0
     ground_silent_hold_s: float = 60.0
+    wind: wind_fit.WindParams | None = None
 
     def __post_init__(self) -> None:
         for name in ("max_ahead_s", "fused_gate_nis", "ground_silent_hold_s"):
@@ -204,6 +206,9 @@ class MissionAgentState:
     now_t_s: float = -math.inf
     #: own-clock time of the last fused estimate or mission state taken (None: never)
     ground_heard_t_s: float | None = None
+    #: the wind fit (``MissionAgentParams.wind``) and whether it has been reported known
+    wind: wind_fit.WindState = field(default_factory=wind_fit.WindState)
+    wind_reported: bool = False
 
 
 def initial_agent_state(
@@ -410,6 +415,11 @@ def control(
     autopilot's to limit, and it does). With ``course_id`` k and the latency are the
     identified ones once ready; the tick (course, command sent) feeds the identifier."""
     flown = _flown_params(state, params)
+    if params.wind is not None:
+        v_east = own.speed_m_s * math.sin(own.course_rad)
+        v_north = own.speed_m_s * math.cos(own.course_rad)
+        fit = wind_fit.update(state.wind, t_s, v_east, v_north, own.airspeed_m_s, params.wind)
+        state = replace(state, wind=fit)
     if flown.latency_s > 0.0 or flown.hold_s > 0.0:
         lead_s = flown.latency_s + 0.5 * flown.hold_s
         course, speed = state.last_command or (own.course_rad, own.speed_m_s)
@@ -418,10 +428,46 @@ def control(
     else:
         state, command, events = _control(state, t_s, own, flown)
     state = replace(state, last_command=(command.course_rad, command.speed_m_s))
+    if params.wind is not None:
+        state, command, known = _in_the_wind(state, t_s, command, flown, params.wind)
+        events = (*events, *known)
     if params.course_id is not None:
         state, learned = _identify(state, t_s, own, command, params, params.course_id)
         events = (*events, *learned)
     return state, command, events
+
+
+def _in_the_wind(
+    state: MissionAgentState,
+    t_s: float,
+    command: Command,
+    params: MissionAgentParams,
+    wind_params: wind_fit.WindParams,
+) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
+    """The command with the airspeed that flies its ground speed along its desired ground
+    course in the estimated wind (unchanged while the wind is unknown); the first time the wind
+    is known, an event says so."""
+    wind = state.wind.estimate(wind_params)
+    if wind is None:
+        return state, command, ()
+    envelope = params.agent.envelope
+    air = wind_fit.airspeed_for(
+        command.field_course_rad,
+        command.speed_m_s,
+        wind,
+        envelope.min_speed_m_s,
+        envelope.max_speed_m_s,
+    )
+    command = replace(command, airspeed_m_s=air)
+    if state.wind_reported:
+        return state, command, ()
+    speed = math.hypot(*wind)
+    toward = math.degrees(math.atan2(wind[0], wind[1])) % 360.0
+    detail = (
+        f"{speed:.1f} m/s toward {toward:.0f} deg, from ground velocity and airspeed: "
+        "commands carry the airspeed that flies their ground speed in it"
+    )
+    return replace(state, wind_reported=True), command, (AgentEvent(t_s, "wind_estimated", detail),)
 
 
 def _flown_params(state: MissionAgentState, params: MissionAgentParams) -> MissionAgentParams:

@@ -1,0 +1,70 @@
+"""The mission agent in the wind: commands carry the airspeed that flies their ground speed."""
+
+import math
+
+import pytest
+
+from app.config import load_config
+from app.config.mission import MissionConfig
+from app.config.plan import build_plan
+from app.core.agent import OwnTelemetry
+from app.core.guidance.wind import airspeed_for
+from app.core.mission import agent as logic
+
+WIND = (3.0, -2.0)  # east, north m/s
+
+
+def _fly(params, airspeed_known=True, seconds=40.0):
+    """Control ticks at 10 Hz of a vehicle orbiting its standby point at 14 m/s through the
+    air in the wind (the standby loiter: no target yet); the commands and events."""
+    state = logic.initial_agent_state(params)
+    commands, events = [], []
+    for k in range(round(seconds * 10)):
+        t = 0.1 * (k + 1)
+        heading = 0.15 * t
+        g_e = 14.0 * math.sin(heading) + WIND[0]
+        g_n = 14.0 * math.cos(heading) + WIND[1]
+        own = OwnTelemetry(
+            -1000.0 + 100.0 * math.cos(heading),
+            100.0 * math.sin(heading),
+            math.atan2(g_e, g_n),
+            math.hypot(g_e, g_n),
+            14.0 if airspeed_known else None,
+        )
+        state, out = logic.step(state, logic.Control(t, own), params)
+        commands.append(out.command)
+        events.extend(e for e in out.events if e.kind == "wind_estimated")
+    return commands, events
+
+
+def _params(wind: str):
+    config = load_config("hil", MissionConfig)
+    config = config.model_copy(
+        update={"guidance": config.guidance.model_copy(update={"wind": wind})}
+    )
+    return build_plan(config).agents[0]
+
+
+def test_once_the_wind_is_known_commands_carry_the_airspeed_for_their_ground_speed():
+    commands, events = _fly(_params("estimate"))
+    assert len(events) == 1  # said once, with the wind it found
+    assert "3.6 m/s toward 124 deg" in events[0].detail
+    early, late = commands[:100], commands[-200:]  # the last 20 s: half a turn
+    assert all(c.airspeed_m_s is None for c in early)  # 10 s, 1.5 rad of turn: not yet known
+    for c in late:
+        assert c.airspeed_m_s is not None
+        want = airspeed_for(c.field_course_rad, c.speed_m_s, WIND, 10.0, 18.0)
+        assert c.airspeed_m_s == pytest.approx(want, abs=0.05)
+        assert 10.0 <= c.airspeed_m_s <= 18.0
+    # upwind and downwind: the airspeeds differ by about twice the wind along the course
+    spread = max(c.airspeed_m_s - c.speed_m_s for c in late) - min(
+        c.airspeed_m_s - c.speed_m_s for c in late
+    )
+    assert spread > 4.0
+
+
+def test_without_an_airspeed_or_with_wind_off_the_command_is_the_ground_speed():
+    for params, known in ((_params("estimate"), False), (_params("off"), True)):
+        commands, events = _fly(params, airspeed_known=known)
+        assert events == []
+        assert all(c.airspeed_m_s is None for c in commands)
