@@ -7,7 +7,7 @@ import pytest
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from app.core.agent import OwnTelemetry
+from app.core.agent import AgentEvent, Command, OwnTelemetry
 from app.core.guidance.wind import airspeed_for
 from app.core.mission import agent as logic
 
@@ -18,7 +18,8 @@ def _fly(params, airspeed_known=True, seconds=40.0):
     """Control ticks at 10 Hz of a vehicle orbiting its standby point at 14 m/s through the
     air in the wind (the standby loiter: no target yet); the commands and events."""
     state = logic.initial_agent_state(params)
-    commands, events = [], []
+    commands: list[Command] = []
+    events: list[AgentEvent] = []
     for k in range(round(seconds * 10)):
         t = 0.1 * (k + 1)
         heading = 0.15 * t
@@ -32,6 +33,7 @@ def _fly(params, airspeed_known=True, seconds=40.0):
             14.0 if airspeed_known else None,
         )
         state, out = logic.step(state, logic.Control(t, own), params)
+        assert out.command is not None
         commands.append(out.command)
         events.extend(e for e in out.events if e.kind == "wind_estimated")
     return commands, events
