@@ -412,14 +412,21 @@ class VehicleAgent:
         try:
             await self._link.send(command)
         except OffboardLostError:
+            # the newest frame may predate the change (its mode still OFFBOARD, or none yet):
+            # the mode is then not known; the link's LeftOffboard names it when it comes
             latest = self._link.latest
-            self._took_over(latest.flight_mode if latest is not None else "UNKNOWN", t)
+            mode = latest.flight_mode if latest is not None else ""
+            self._took_over(mode if mode not in ("OFFBOARD", "") else "UNKNOWN", t)
         except LinkError as exc:
             self.counters.commands_refused += 1
             self._events.emit("command_refused", t, vehicle=self.params.vehicle, reason=str(exc))
 
     def _took_over(self, mode: str, t: float) -> None:
         """Someone else changed the vehicle's mode: leave it there, say so, send nothing."""
+        if self._pilot_mode == "UNKNOWN" and mode != "UNKNOWN":
+            self._pilot_mode = mode  # now known: 'resumed' says the mode it was taken from
+            self._events.emit("pilot_mode", t, vehicle=self.params.vehicle, flight_mode=mode)
+            return
         if self._pilot_mode is not None or self.state.holding:
             return
         self._pilot_mode = mode

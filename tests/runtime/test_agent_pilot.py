@@ -309,3 +309,38 @@ async def test_typed_lines_reach_the_agents_as_commands_and_bad_ones_are_skipped
     assert isinstance(message, bus.Command)
     assert (message.command, message.vehicles, message.t_s) == ("resume", (1,), 42.0)
     assert events.of("operator_command") == [{"command": "resume", "vehicles": (1,)}]
+
+
+async def test_a_refused_setpoint_before_the_new_mode_is_seen_is_reported_unknown_then_named():
+    # MAVSDK can refuse a setpoint (offboard lost) before any frame shows the new mode: the
+    # newest frame still says OFFBOARD, which must not be reported as the mode it was put in
+    plan = build_plan(load_config("hil", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    events = Events()
+    async with (
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id="ground") as ground,
+        asyncio.TaskGroup() as tg,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, events)
+        running = tg.create_task(agent.run())
+        fly = Flyer(link)
+        await fly.frames(20)
+        await until(lambda: link.sent >= 10)
+        link.mode = "RTL"  # a failsafe: sends are refused, the frames do not show it yet
+        fly.t += 0.1
+        link.put(frame(fly.t, -850.0, 0.0, flight_mode="OFFBOARD"))
+        await until(lambda: bool(events.of("pilot_took_over")))
+        assert events.of("pilot_took_over") == [{"vehicle": 0, "flight_mode": "UNKNOWN"}]
+        assert agent.pilot_has_control
+        link.leave_offboard("RTL", fly.t + 0.1)  # the link names the mode
+        await until(lambda: bool(events.of("pilot_mode")))
+        assert events.of("pilot_mode") == [{"vehicle": 0, "flight_mode": "RTL"}]
+        assert len(events.of("pilot_took_over")) == 1  # one take-over, not two
+        await ground.publish(
+            topics.command(), bus.Command(sender="ground", t_s=0.0, command="resume")
+        )
+        await until(lambda: link.offboard_starts == 1)
+        assert events.of("resumed") == [{"vehicle": 0, "from_mode": "RTL"}]
+        running.cancel()
