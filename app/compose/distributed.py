@@ -715,6 +715,7 @@ class _Flight:
     def counters(self, bus: Bus) -> dict[str, Any]:
         out: dict[str, Any] = {"bus": dataclasses.asdict(bus.stats)}
         if self._agent is not None:
+            self._agent.measure_cpu()
             out["agent"] = dataclasses.asdict(self._agent.counters)
         if (link_counters := counters_of(self._link)) is not None:
             out["link"] = link_counters

@@ -209,6 +209,7 @@ class VehicleAgent:
         self._load = _LoadWindow()
         self._fixes = _FixBucket(runtime.max_fix_rate_hz, runtime.fix_burst)
         self._faults: dict[str, int] = {}
+        self._started: float | None = None  # monotonic time ``run`` began
 
     @property
     def pilot_has_control(self) -> bool:
@@ -232,15 +233,22 @@ class VehicleAgent:
 
     async def run(self) -> None:
         v = self.params.vehicle
-        started = time.monotonic()
+        self._started = time.monotonic()
         try:
             await self._run(v)
         finally:
-            c = self.counters
-            c.wall_s = time.monotonic() - started
-            rate = self._runtime.clock_rate
-            if c.wall_s > 0.0 and rate > 0.0:
-                c.cpu_share_at_1x = c.cpu_s / (c.wall_s * rate)
+            self.measure_cpu()
+
+    def measure_cpu(self) -> None:
+        """Bring the counters' ``wall_s`` and ``cpu_share_at_1x`` up to now (also while the
+        agent still runs, for a process that writes its counters before it stops)."""
+        if self._started is None:
+            return
+        c = self.counters
+        c.wall_s = time.monotonic() - self._started
+        rate = self._runtime.clock_rate
+        if c.wall_s > 0.0 and rate > 0.0:
+            c.cpu_share_at_1x = c.cpu_s / (c.wall_s * rate)
 
     async def _run(self, v: int) -> None:
         async with (

@@ -405,6 +405,9 @@ def test_ground_and_three_agents_fly_the_mission_over_mosquitto(team_run: TeamRu
         report = json.loads((out / f"agent-{i + 1}.json").read_text())
         assert report["reason"] == "shutdown"
         assert report["counters"]["agent"]["ticks"] > 100
+        # the agent process's own CPU, measured up to when it wrote its file
+        assert report["counters"]["agent"]["cpu_s"] > 0.0
+        assert 0.0 < report["counters"]["agent"]["cpu_share_at_1x"] < 0.5
         assert report["counters"]["link"]["setpoints"] > 100
         assert report["counters"]["bus"]["malformed"] == 0
         # through the logins, the ACL and the seals: nothing of the team's own was refused,
