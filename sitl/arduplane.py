@@ -49,6 +49,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from app.core.frames import wrap_pi
+from app.core.plant import heading_for_ground_course
 from sitl.config import SimConfig, VehicleConfig
 from sitl.guidance import (
     Command,
@@ -56,7 +57,6 @@ from sitl.guidance import (
     LoiterCommand,
     VelocityCommand,
     guide,
-    heading_for_ground_course,
 )
 from sitl.telemetry import GRAVITY_M_S2
 from sitl.vehicle import (

@@ -8,7 +8,6 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from app.core.frames import wrap_pi
 from app.core.plant import FixedWingState
 
 LINE_LOOKAHEAD_M: Final = 50.0
@@ -89,20 +88,3 @@ def guide(state: FixedWingState, cmd: Command, course_gain_per_s: float) -> tupl
     course = bearing + sense * (0.5 * math.pi + math.atan(2.0 * off))
     feed_forward = sense * (state.speed_m_s / cmd.radius_m) * max(0.0, 1.0 - abs(off))
     return course + feed_forward / course_gain_per_s, cmd.speed_m_s
-
-
-def heading_for_ground_course(
-    course_rad: float, airspeed_m_s: float, wind_east_m_s: float, wind_north_m_s: float
-) -> float:
-    """The heading through the air whose ground track is ``course_rad`` in the wind.
-
-    The wind's component across the course is cancelled: sin(heading - course) = -w_cross / V.
-    A cross wind the airspeed cannot cancel (|w_cross| >= V) is turned into as far as it can be
-    (90 degrees), the best the aircraft can do.
-    """
-    if airspeed_m_s <= 0.0:
-        return course_rad
-    right_e, right_n = math.cos(course_rad), -math.sin(course_rad)  # unit vector to the right
-    cross = wind_east_m_s * right_e + wind_north_m_s * right_n
-    ratio = max(-1.0, min(1.0, -cross / airspeed_m_s))
-    return wrap_pi(course_rad + math.asin(ratio))

@@ -43,6 +43,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.core.frames import wrap_pi
+from app.core.plant import heading_for_ground_course
 from sitl import telemetry
 from sitl.config import SimConfig
 from sitl.guidance import (
@@ -51,7 +52,6 @@ from sitl.guidance import (
     LoiterCommand,
     VelocityCommand,
     guide,
-    heading_for_ground_course,
 )
 from sitl.vehicle import (
     ARM_DISARM_FORCE,

@@ -15,6 +15,12 @@ in the order the live mission does, carrying each outbox to where the bus would:
   ``latency_ticks`` control periods (0: at once, as the live loop nearly does; 1: one tick
   late) and held between ticks.
 
+The plan's ``[sim.wind]`` blows as the built-in simulator blows it (steady plus first-order
+Gauss-Markov gusts per axis, one field for the whole team, seeded by ``seed``); in it the
+vehicles hold the commanded ground course as NPFG does (``fly_team``'s wind), telemetry is
+ground course and speed plus airspeed, and a command's airspeed (the wind estimate's) is flown
+where it carries one, else its speed as the airspeed (what the autopilots do).
+
 Figures come from ``app.report.summary.summarize`` on the same ``TeamSample``s the ground
 station records (errors against the true target), so they read like a live run's
 ``summary.json``. It puts together a plan (config), the core, the runtime's stepping loop
@@ -133,6 +139,43 @@ def _truth_estimate(t_s: float, truth: Any) -> GlobalEstimate:
     return GlobalEstimate(t_s, x, np.eye(6) * 1e-6, ())
 
 
+class _Gusts:
+    """The plan's wind, one physics step at a time (the built-in simulator's process)."""
+
+    def __init__(self, plan: MissionPlan, seed: int, dt_s: float) -> None:
+        model = plan.config.sim.wind
+        toward = math.radians(model.toward_deg)
+        self.steady = (model.speed_m_s * math.sin(toward), model.speed_m_s * math.cos(toward))
+        self.blows = model.speed_m_s > 0.0 or model.gust_sigma_m_s > 0.0
+        self._decay = math.exp(-dt_s / model.gust_tau_s)
+        self._spread = model.gust_sigma_m_s * math.sqrt(1.0 - self._decay**2)
+        self._rng = np.random.default_rng([seed, 1_000_003])
+        self._gust = (0.0, 0.0)
+        self.now = self.steady
+
+    def __call__(self, step_index: int) -> tuple[float, float]:
+        """The wind blowing during physics step ``step_index`` (called once per step, in order)."""
+        if self._spread > 0.0:
+            draws = self._rng.standard_normal(2)
+            self._gust = (
+                self._decay * self._gust[0] + self._spread * float(draws[0]),
+                self._decay * self._gust[1] + self._spread * float(draws[1]),
+            )
+        self.now = (self.steady[0] + self._gust[0], self.steady[1] + self._gust[1])
+        return self.now
+
+
+def _own(v: FixedWingState, wind: tuple[float, float] | None) -> OwnTelemetry:
+    """The vehicle's telemetry: its state in still air; in wind (``v`` air-relative) its ground
+    course and speed, with the airspeed."""
+    if wind is None:
+        return OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
+    g_e, g_n = v.v_east_m_s + wind[0], v.v_north_m_s + wind[1]
+    return OwnTelemetry(
+        v.east_m, v.north_m, math.atan2(g_e, g_n), math.hypot(g_e, g_n), v.speed_m_s
+    )
+
+
 def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     """Fly the plan to its end (see the module docstring); deterministic for a given setup."""
     plan = setup.plan
@@ -162,12 +205,14 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     commands: list[tuple[float, int, float, float, float]] = []
     events: list[tuple[float, str, str]] = []
     path = plan.target
+    gusts = _Gusts(plan, setup.seed, dt)
+    blowing = gusts if gusts.blows else None
 
     def control(t: float, vehicles: Sequence[FixedWingState]) -> Commands:
         """Statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes;
         then each agent's command."""
         nonlocal gstate
-        owns = [OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s) for v in vehicles]
+        owns = [_own(v, gusts.now if blowing else None) for v in vehicles]
         statuses: list[tuple[int, logic.AgentStatus]] = []
         for i, own in enumerate(owns):
             states[i], out = logic.step(states[i], logic.Telemetry(t, own), agents[i])
@@ -196,7 +241,10 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
             events.extend((e.t_s, e.kind, f"vehicle {i + 1}: {e.detail}") for e in out.events)
             command = out.command
             if command is None:  # a holding agent: the vehicle keeps its course and speed
-                out_commands.append((own.course_rad, own.speed_m_s))
+                held_speed = own.speed_m_s if own.airspeed_m_s is None else own.airspeed_m_s
+                out_commands.append((own.course_rad, held_speed))
+            elif blowing is not None and command.airspeed_m_s is not None:
+                out_commands.append((command.course_rad, command.airspeed_m_s))
             else:
                 out_commands.append((command.course_rad, command.speed_m_s))
         return out_commands
@@ -238,6 +286,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         latency_ticks=setup.latency_ticks,
         applied=applied,
         stepped=stepped,
+        wind=blowing,
     )
     summary = summarize(
         samples,

@@ -27,7 +27,7 @@ from app.core.agent import (
 from app.core.frames import TAU
 from app.core.mission.stage import adjacent_phase_differences
 from app.core.phase import orbit_order, phase_time_lower_bound
-from app.core.plant import FixedWingState, VehicleEnvelope, step
+from app.core.plant import FixedWingState, VehicleEnvelope, heading_for_ground_course, step
 from app.core.sampled_run import FloatArray, SimulationResult
 from app.core.target import TargetMotion
 
@@ -75,6 +75,7 @@ def fly_team(
     latency_ticks: int = 0,
     applied: Callable[[float, Commands, Sequence[FixedWingState]], None] | None = None,
     stepped: Callable[[int, Sequence[FixedWingState]], None] | None = None,
+    wind: Callable[[int], tuple[float, float]] | None = None,
 ) -> list[FixedWingState]:
     """The stepping loop of every fast simulation: ticks 0..``ticks`` at
     ``t = tick * steps_per_tick * dt_s``; at each, ``control(t, team)`` gives the commands,
@@ -82,7 +83,13 @@ def fly_team(
     held over the tick's ``steps_per_tick`` physics steps of ``dt_s`` (eq. 2,
     ``app.core.plant.step``), after each of which ``stepped(step index from 1, team)`` runs.
     Before the first commands act, each vehicle holds its start course and speed. Returns the
-    team at the last tick."""
+    team at the last tick.
+
+    With ``wind`` (physics step index from 0 -> (east, north) m/s blowing during that step) the
+    states are air-relative (heading, airspeed; the position over the ground) and a command is
+    (ground course, airspeed): each step flies the heading that holds the commanded course over
+    the ground in that step's wind (``heading_for_ground_course``, as NPFG and L1 do with their
+    wind estimate), so the ground course follows the command and a cross wind costs a crab."""
     vehicles = list(starts)
     pending: deque[tuple[float, Commands]] = deque()
     held = [(v.course_rad, v.speed_m_s) for v in vehicles]
@@ -105,9 +112,24 @@ def fly_team(
         if len(held) != len(vehicles):
             raise ValueError(f"{len(held)} commands for {len(vehicles)} vehicles")
         for _ in range(steps_per_tick):
-            vehicles = [
-                step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=False)
-            ]
+            if wind is None:
+                vehicles = [
+                    step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=False)
+                ]
+            else:
+                w_e, w_n = wind(step_index)
+                vehicles = [
+                    step(
+                        v,
+                        heading_for_ground_course(c, v.speed_m_s, w_e, w_n),
+                        s,
+                        limits,
+                        dt_s,
+                        w_e,
+                        w_n,
+                    )
+                    for v, (c, s) in zip(vehicles, held, strict=False)
+                ]
             step_index += 1
             if stepped is not None:
                 stepped(step_index, vehicles)

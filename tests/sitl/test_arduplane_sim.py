@@ -20,14 +20,13 @@ from app.adapters.vehicle.autopilots.limits import SetpointLimits
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.core.frames import wrap_pi
-from app.core.plant import VehicleEnvelope
+from app.core.plant import VehicleEnvelope, heading_for_ground_course
 from app.errors import LinkError
 from app.runtime.ports.vehicle import CourseSpeedCommand, LeftOffboard, OffboardLostError
 from sitl.arduplane import GUIDED, long_failsafe_mode
 from sitl.camera import TrackingCamera
 from sitl.config import SimConfig, default_vehicles
 from sitl.geodesy import Geodesy
-from sitl.guidance import heading_for_ground_course
 from sitl.server import autopilot_for
 from sitl.vehicle import SimVehicle
 from tests.adapters.test_vehicle_link_sim import fly, next_event, origin_of, urls_of
