@@ -46,10 +46,11 @@ class MissionGuidanceConfig(GuidanceConfig):
     ``course_loop_identification``: identify each vehicle's course loop (gain k, delay) in
     flight and fly it (``fly``), only report it in the event log (``report``), or assume the
     envelope's k (``off``); ``app.core.guidance.course_id``.
-    ``wind``: fit the wind from each vehicle's ground velocity and airspeed and command the
-    airspeed that flies the guidance's ground speed in it (``estimate``), or command the ground
-    speed as the airspeed (``off``, the paper's still-air assumption);
-    ``app.core.guidance.wind``."""
+    ``wind``: fit the wind from each vehicle's ground velocity and airspeed; to the circle
+    (gather, adjust) command the airspeed that flies the guidance's ground speed in it, and in
+    the track stage fly the guidance in the air mass (``estimate``), or the airspeed conversion
+    in every stage (``airspeed``), or command the ground speed as the airspeed (``off``, the
+    paper's still-air assumption); ``app.core.guidance.wind``, docs/guidance.md "Wind"."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
@@ -57,7 +58,7 @@ class MissionGuidanceConfig(GuidanceConfig):
     latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
     course_loop_identification: Literal["fly", "report", "off"] = "fly"
-    wind: Literal["estimate", "off"] = "estimate"
+    wind: Literal["estimate", "airspeed", "off"] = "estimate"
 
 
 class MissionPhaseConfig(PhaseConfig):

@@ -101,7 +101,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                     else course_id.params_for(envelope)
                 ),
                 fly_identified=g.course_loop_identification == "fly",
-                wind=WindParams() if g.wind == "estimate" else None,
+                wind=None if g.wind == "off" else WindParams(air_frame=g.wind == "estimate"),
             )
             for i in range(n)
         )

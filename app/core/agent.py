@@ -745,7 +745,7 @@ def _ground_course(
     return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), max_speed_m_s)
 
 
-def _orbit_axes(speed_m_s: float, params: AgentParams, rd: float) -> tuple[float, float]:
+def orbit_axes(speed_m_s: float, params: AgentParams, rd: float) -> tuple[float, float]:
     """Semi-axes (along, across the target's motion) of the orbit flown around a target moving
     at ``speed_m_s``: the planned one about the circle ``rd`` with ``orbit_plan = "ellipse"``,
     else the circle."""
@@ -770,7 +770,7 @@ def _speed_cap(
     speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
     if speed < 0.1:
         return env.max_speed_m_s
-    a, b = _orbit_axes(speed, params, rd)
+    a, b = orbit_axes(speed, params, rd)
     profile = orbit_speed_profile(
         a,
         b,
@@ -804,7 +804,7 @@ def _relative_course(
     sign = g.orbit_sign
     speed = math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
     if g.orbit_plan == "ellipse" and not inverse and speed >= 0.5:
-        a, b = _orbit_axes(speed, params, rd)
+        a, b = orbit_axes(speed, params, rd)
         if a != b:
             ux, uy = tgt.v_east_m_s / speed, tgt.v_north_m_s / speed
             orbit = PlannedOrbit(a, b, ux, uy)

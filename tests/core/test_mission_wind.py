@@ -14,20 +14,25 @@ from app.core.mission import agent as logic
 WIND = (3.0, -2.0)  # east, north m/s
 
 
-def _fly(params, airspeed_known=True, seconds=40.0):
+def _fly(
+    params, airspeed_known=True, seconds=40.0, gust=(0.0, 0.0), gust_from_s=math.inf, radius=100.0
+):
     """Control ticks at 10 Hz of a vehicle orbiting its standby point at 14 m/s through the
-    air in the wind (the standby loiter: no target yet); the commands and events."""
+    air in the wind (the standby loiter: no target yet), with ``gust`` (east, north m/s) added
+    to the wind from ``gust_from_s`` on, on a circle of ``radius`` m about it; the commands
+    and events."""
     state = logic.initial_agent_state(params)
     commands: list[Command] = []
     events: list[AgentEvent] = []
     for k in range(round(seconds * 10)):
         t = 0.1 * (k + 1)
         heading = 0.15 * t
-        g_e = 14.0 * math.sin(heading) + WIND[0]
-        g_n = 14.0 * math.cos(heading) + WIND[1]
+        extra = gust if t >= gust_from_s else (0.0, 0.0)
+        g_e = 14.0 * math.sin(heading) + WIND[0] + extra[0]
+        g_n = 14.0 * math.cos(heading) + WIND[1] + extra[1]
         own = OwnTelemetry(
-            -1000.0 + 100.0 * math.cos(heading),
-            100.0 * math.sin(heading),
+            -1000.0 + radius * math.cos(heading),
+            radius * math.sin(heading),
             math.atan2(g_e, g_n),
             math.hypot(g_e, g_n),
             14.0 if airspeed_known else None,
@@ -55,7 +60,9 @@ def test_once_the_wind_is_known_commands_carry_the_airspeed_for_their_ground_spe
     assert all(c.airspeed_m_s is None for c in early)  # 10 s, 1.5 rad of turn: not yet known
     for c in late:
         assert c.airspeed_m_s is not None
-        want = airspeed_for(c.field_course_rad, c.speed_m_s, WIND, 10.0, 18.0)
+        # for the course one speed-loop time constant (1 / speed_gain_per_s = 1 s) ahead
+        ahead = c.field_course_rad + c.course_rate_ff_rad_s * 1.0
+        want = airspeed_for(ahead, c.speed_m_s, WIND, 10.0, 18.0)
         assert c.airspeed_m_s == pytest.approx(want, abs=0.05)
         assert 10.0 <= c.airspeed_m_s <= 18.0
     # upwind and downwind: the airspeeds differ by about twice the wind along the course
@@ -70,3 +77,28 @@ def test_without_an_airspeed_or_with_wind_off_the_command_is_the_ground_speed():
         commands, events = _fly(params, airspeed_known=known)
         assert events == []
         assert all(c.airspeed_m_s is None for c in commands)
+
+
+def test_a_gust_along_the_track_is_flown_out_by_the_airspeed():
+    """Once the wind is known, a sudden extra wind the slow fit has not taken in yet shows as
+    ground speed the airspeed does not explain; within a few seconds the airspeed commanded
+    is what flies the command in the wind plus that gust (here a 1.5 m/s gust along the
+    vehicle's track; the slow fit takes in a little of it meanwhile)."""
+    params = _params("estimate")
+    # on the standby loiter's own circle (150 m), so the command's course is the vehicle's
+    calm, _ = _fly(params, seconds=40.0, radius=150.0)
+    # the vehicle's ground course at t = 40 s: the gust blows along it
+    heading = 0.15 * 40.0
+    g_e, g_n = 14.0 * math.sin(heading) + WIND[0], 14.0 * math.cos(heading) + WIND[1]
+    course = math.atan2(g_e, g_n)
+    gust = (1.5 * math.sin(course), 1.5 * math.cos(course))
+    gusty, _ = _fly(params, seconds=40.0, gust=gust, gust_from_s=35.0, radius=150.0)
+    # 5 s of a 1 s low-pass: nearly the whole gust is taken
+    c = gusty[-1]
+    ahead = c.field_course_rad + c.course_rate_ff_rad_s * 1.0
+    blowing = (WIND[0] + gust[0], WIND[1] + gust[1])
+    with_gust = airspeed_for(ahead, c.speed_m_s, blowing, 10.0, 18.0)
+    without = airspeed_for(ahead, c.speed_m_s, WIND, 10.0, 18.0)
+    assert abs(with_gust - without) > 0.8  # the gust matters along the command's course
+    assert c.airspeed_m_s == pytest.approx(with_gust, abs=0.25)
+    assert calm[-300].airspeed_m_s == gusty[-300].airspeed_m_s  # before the gust: the same

@@ -13,7 +13,11 @@ singular and the estimate stays unknown (``ready`` False) rather than wrong.
 What the mission does with it (``airspeed_for``): the guidance and the phase keeping ask for a
 ground velocity (the course and the speed along it); the autopilot is given the airspeed that
 flies it in the estimated wind, so the phase rate the spacing law asks for is the one the vehicle
-gets on the upwind and on the downwind side of the circle alike.
+gets on the upwind and on the downwind side of the circle alike. Two things the slow fit cannot
+follow are added to it: the gust along the track now (``along_track_gust``: the ground speed
+measured against the one the measured airspeed gives in the fitted wind, low-passed over
+``gust_time_constant_s``), and the autopilot's speed-loop lag (the airspeed is the one needed
+where the course will be one speed-loop time constant later).
 """
 
 import math
@@ -32,15 +36,36 @@ class WindParams:
     eigenvalue of 4 Cov(g) over the mean |g|^2 (2 for a whole turn, 0.12 for about 140 degrees
     of one: a short arc leaves the along-track wind and the airspeed's scale apart unresolved);
     ``max_wind_m_s``: a fit beyond this is not believed (bad airspeed data), nor one whose
-    airspeeds disagree with its wind by more than ``max_mismatch_m_s`` (see ``estimate``)."""
+    airspeeds disagree with its wind by more than ``max_mismatch_m_s`` (see ``estimate``).
+    ``gust_time_constant_s``: the low-pass of the along-track gust (s); ``max_gust_m_s``: the
+    largest gust taken (beyond it the measurement is more likely wrong than the wind).
+    ``hold_s``: how long the mission agent keeps flying the last believed wind while the fit
+    is not believed (a straight leg, a gusty spell).
+    ``air_frame``: in the track stage, fly the guidance in the air mass (the mission agent's
+    ``control``: the vehicle's heading and airspeed, the target moving at its ground velocity
+    less the wind), so that the optimal c, the planned orbit, the speed cap and the phase law
+    see the turn the vehicle really has to fly; False: the ground-speed conversion
+    (``airspeed_for``) in every stage."""
 
     time_constant_s: float = 30.0
     min_spread: float = 0.12
     max_wind_m_s: float = 15.0
     max_mismatch_m_s: float = 2.0
+    gust_time_constant_s: float = 1.0
+    max_gust_m_s: float = 4.0
+    air_frame: bool = True
+    hold_s: float = 60.0
 
     def __post_init__(self) -> None:
-        names = ("time_constant_s", "min_spread", "max_wind_m_s", "max_mismatch_m_s")
+        names = (
+            "time_constant_s",
+            "min_spread",
+            "max_wind_m_s",
+            "max_mismatch_m_s",
+            "gust_time_constant_s",
+            "max_gust_m_s",
+            "hold_s",
+        )
         for name in names:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -132,3 +157,40 @@ def airspeed_for(
     g_north = ground_speed_m_s * math.cos(course_rad)
     air = math.hypot(g_east - wind[0], g_north - wind[1])
     return min(max(air, min_airspeed_m_s), max_airspeed_m_s)
+
+
+def along_track_gust(
+    course_rad: float,
+    ground_speed_m_s: float,
+    airspeed_m_s: float | None,
+    wind: tuple[float, float],
+) -> float | None:
+    """The wind along the ground track beyond the fitted ``wind`` (m/s, positive with the
+    track): the ground speed measured minus the one the measured airspeed flies along
+    ``course_rad`` in ``wind`` (w . t + sqrt(a^2 - (w x t)^2)). None without a usable airspeed
+    or where the cross wind exceeds it."""
+    if airspeed_m_s is None or not (math.isfinite(airspeed_m_s) and airspeed_m_s > 0.0):
+        return None
+    t_east, t_north = math.sin(course_rad), math.cos(course_rad)
+    along = wind[0] * t_east + wind[1] * t_north
+    cross = wind[0] * t_north - wind[1] * t_east
+    inside = airspeed_m_s * airspeed_m_s - cross * cross
+    if not inside > 0.0:
+        return None
+    gust = ground_speed_m_s - (along + math.sqrt(inside))
+    return gust if math.isfinite(gust) else None
+
+
+def filtered_gust(
+    previous_m_s: float, previous_t_s: float, gust_m_s: float, t_s: float, params: WindParams
+) -> float:
+    """The low-passed along-track gust after a new measurement ``gust_m_s`` of time ``t_s``
+    (first order, ``gust_time_constant_s``; a first measurement or time going back restarts
+    it), held within ``max_gust_m_s``."""
+    limit = params.max_gust_m_s
+    gust = min(max(gust_m_s, -limit), limit)
+    dt = t_s - previous_t_s
+    if not (0.0 < dt < math.inf):
+        return gust if not math.isfinite(previous_t_s) or dt < 0.0 else previous_m_s
+    blend = 1.0 - math.exp(-dt / params.gust_time_constant_s)
+    return previous_m_s + blend * (gust - previous_m_s)

@@ -45,6 +45,7 @@ from app.core.agent import (
     OwnTelemetry,
     TargetInfo,
     agent_step,
+    orbit_axes,
     predict_own,
 )
 from app.core.estimation.federated import MainParams, apply_feedback
@@ -209,6 +210,15 @@ class MissionAgentState:
     #: the wind fit (``MissionAgentParams.wind``) and whether it has been reported known
     wind: wind_fit.WindState = field(default_factory=wind_fit.WindState)
     wind_reported: bool = False
+    #: the newest wind the fit believed and when (held while it does not, ``_fit_wind``)
+    wind_believed: tuple[float, tuple[float, float]] | None = None
+    #: the low-passed along-track gust (m/s) and the time of its newest measurement
+    gust_m_s: float = 0.0
+    gust_t_s: float = -math.inf
+    #: the planned orbit's semi-axes (m) last reported (``orbit_planned``; None: the circle)
+    #: and when
+    orbit_reported: tuple[float, float] | None = None
+    orbit_reported_t_s: float = -math.inf
 
 
 def initial_agent_state(
@@ -415,21 +425,27 @@ def control(
     autopilot's to limit, and it does). With ``course_id`` k and the latency are the
     identified ones once ready; the tick (course, command sent) feeds the identifier."""
     flown = _flown_params(state, params)
+    wind = known_wind = None
     if params.wind is not None:
-        v_east = own.speed_m_s * math.sin(own.course_rad)
-        v_north = own.speed_m_s * math.cos(own.course_rad)
-        fit = wind_fit.update(state.wind, t_s, v_east, v_north, own.airspeed_m_s, params.wind)
-        state = replace(state, wind=fit)
+        state, known_wind = _fit_wind(state, t_s, own, params.wind)
+        if params.wind.air_frame and state.stage == "track":
+            wind = known_wind
+    steer = own if wind is None else _through_the_air(own, wind)
     if flown.latency_s > 0.0 or flown.hold_s > 0.0:
         lead_s = flown.latency_s + 0.5 * flown.hold_s
-        course, speed = state.last_command or (own.course_rad, own.speed_m_s)
-        ahead = predict_own(own, course, speed, flown.agent.envelope, lead_s)
-        state, command, events = _control(state, t_s + lead_s, ahead, flown)
+        course, speed = state.last_command or (steer.course_rad, steer.speed_m_s)
+        ahead = predict_own(steer, course, speed, flown.agent.envelope, lead_s)
+        state, command, events = _control(state, t_s + lead_s, ahead, flown, wind)
     else:
-        state, command, events = _control(state, t_s, own, flown)
+        state, command, events = _control(state, t_s, steer, flown, wind)
     state = replace(state, last_command=(command.course_rad, command.speed_m_s))
-    if params.wind is not None:
-        state, command, known = _in_the_wind(state, t_s, command, flown, params.wind)
+    if wind is not None:
+        state, command, known = _over_the_ground(state, t_s, command, wind)
+        events = (*events, *known)
+    if wind is None and known_wind is not None and params.wind is not None:
+        state, command, known = _in_the_wind(
+            state, t_s, own, command, flown, known_wind, params.wind
+        )
         events = (*events, *known)
     if params.course_id is not None:
         state, learned = _identify(state, t_s, own, command, params, params.course_id)
@@ -437,24 +453,109 @@ def control(
     return state, command, events
 
 
+def _through_the_air(own: OwnTelemetry, wind: tuple[float, float]) -> OwnTelemetry:
+    """The vehicle as the air mass sees it: its position, and its velocity less the wind
+    (heading and airspeed). Where that is too slow to have a direction, ``own`` itself."""
+    a_east = own.speed_m_s * math.sin(own.course_rad) - wind[0]
+    a_north = own.speed_m_s * math.cos(own.course_rad) - wind[1]
+    speed = math.hypot(a_east, a_north)
+    if speed < 1.0:
+        return own
+    return OwnTelemetry(
+        own.east_m, own.north_m, math.atan2(a_east, a_north), speed, own.airspeed_m_s
+    )
+
+
+def _ground_velocity(
+    heading_rad: float, airspeed_m_s: float, wind: tuple[float, float]
+) -> tuple[float, float]:
+    return airspeed_m_s * math.sin(heading_rad) + wind[0], airspeed_m_s * math.cos(
+        heading_rad
+    ) + wind[1]
+
+
+def _over_the_ground(
+    state: MissionAgentState, t_s: float, command: Command, wind: tuple[float, float]
+) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
+    """A command the guidance computed in the air mass (heading, airspeed; the target moving
+    at its ground velocity less the wind) as the autopilot takes it: the ground course of that
+    air velocity in the wind, with the airspeed itself (``airspeed_m_s``). The first time the
+    wind is known, an event says so."""
+    air = command.speed_m_s
+    g_east, g_north = _ground_velocity(command.course_rad, air, wind)
+    f_east, f_north = _ground_velocity(command.field_course_rad, air, wind)
+    ground2 = f_east * f_east + f_north * f_north
+    # the ground course turns at (a (a + w . h) / |g|^2) times the heading's rate
+    along = wind[0] * math.sin(command.field_course_rad) + wind[1] * math.cos(
+        command.field_course_rad
+    )
+    rate_scale = air * (air + along) / ground2 if ground2 > 1.0 else 1.0
+    command = replace(
+        command,
+        course_rad=math.atan2(g_east, g_north),
+        speed_m_s=math.hypot(g_east, g_north),
+        field_course_rad=math.atan2(f_east, f_north),
+        course_rate_ff_rad_s=command.course_rate_ff_rad_s * rate_scale,
+        airspeed_m_s=air,
+    )
+    if state.wind_reported:
+        return state, command, ()
+    speed = math.hypot(*wind)
+    toward = math.degrees(math.atan2(wind[0], wind[1])) % 360.0
+    detail = (
+        f"{speed:.1f} m/s toward {toward:.0f} deg, from ground velocity and airspeed: "
+        "guidance flies in the air mass (the target moving at its ground velocity less the wind)"
+    )
+    return replace(state, wind_reported=True), command, (AgentEvent(t_s, "wind_estimated", detail),)
+
+
+def _fit_wind(
+    state: MissionAgentState, t_s: float, own: OwnTelemetry, params: wind_fit.WindParams
+) -> tuple[MissionAgentState, tuple[float, float] | None]:
+    """The wind fit with this frame, and the wind believed: the fit's, or while it is not
+    believed for a moment (a straight leg, a gusty spell) the last believed one for up to
+    ``hold_s``, so the guidance does not switch frames tick by tick."""
+    v_east = own.speed_m_s * math.sin(own.course_rad)
+    v_north = own.speed_m_s * math.cos(own.course_rad)
+    fit = wind_fit.update(state.wind, t_s, v_east, v_north, own.airspeed_m_s, params)
+    wind = fit.estimate(params)
+    if wind is not None:
+        return replace(state, wind=fit, wind_believed=(t_s, wind)), wind
+    state = replace(state, wind=fit)
+    held = state.wind_believed
+    if held is not None and 0.0 <= t_s - held[0] <= params.hold_s:
+        return state, held[1]
+    return state, None
+
+
 def _in_the_wind(
     state: MissionAgentState,
     t_s: float,
+    own: OwnTelemetry,
     command: Command,
     params: MissionAgentParams,
+    wind: tuple[float, float],
     wind_params: wind_fit.WindParams,
 ) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
     """The command with the airspeed that flies its ground speed along its desired ground
-    course in the estimated wind (unchanged while the wind is unknown); the first time the wind
-    is known, an event says so."""
-    wind = state.wind.estimate(wind_params)
-    if wind is None:
-        return state, command, ()
+    course in the estimated wind plus the along-track gust measured now, for the course one
+    speed-loop time constant ahead (the autopilot's airspeed lags its command by about that);
+    unchanged while the wind is unknown. The first time the wind is known, an event says so."""
+    gust = wind_fit.along_track_gust(own.course_rad, own.speed_m_s, own.airspeed_m_s, wind)
+    if gust is not None:
+        filtered = wind_fit.filtered_gust(state.gust_m_s, state.gust_t_s, gust, t_s, wind_params)
+        state = replace(state, gust_m_s=filtered, gust_t_s=t_s)
     envelope = params.agent.envelope
+    lag_s = 1.0 / envelope.speed_gain_per_s
+    # the gust was measured along the vehicle's own track: it blows that way
+    blowing = (
+        wind[0] + state.gust_m_s * math.sin(own.course_rad),
+        wind[1] + state.gust_m_s * math.cos(own.course_rad),
+    )
     air = wind_fit.airspeed_for(
-        command.field_course_rad,
+        command.field_course_rad + command.course_rate_ff_rad_s * lag_s,
         command.speed_m_s,
-        wind,
+        blowing,
         envelope.min_speed_m_s,
         envelope.max_speed_m_s,
     )
@@ -548,11 +649,18 @@ def identified_course_loop(state: MissionAgentState) -> tuple[float, float] | No
 
 
 def _control(
-    state: MissionAgentState, t_s: float, own: OwnTelemetry, params: MissionAgentParams
+    state: MissionAgentState,
+    t_s: float,
+    own: OwnTelemetry,
+    params: MissionAgentParams,
+    wind: tuple[float, float] | None = None,
 ) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
+    """The guidance's command; with ``wind`` in the air mass (``own`` its heading and airspeed,
+    the target and the standby point moving at their ground velocity less the wind)."""
     target = None if state.stage == "standby" else target_at(state, t_s, params)
+    w_east, w_north = (0.0, 0.0) if wind is None else wind
     if target is None:
-        standby = TargetInfo(params.standby_east_m, params.standby_north_m)
+        standby = TargetInfo(params.standby_east_m, params.standby_north_m, -w_east, -w_north)
         inputs = AgentInputs(t_s=t_s, own=own, target=standby)
         g, command, events = agent_step(state.standby_guidance, inputs, params.standby)
         return replace(state, standby_guidance=g), command, events
@@ -571,9 +679,56 @@ def _control(
                 team.append(fix.at(t_s, params.max_age_s))
     base = _flown(state, target, params)
     agent = base if base.index == index else replace(base, index=index)
+    if wind is not None:
+        target = replace(
+            target, v_east_m_s=target.v_east_m_s - w_east, v_north_m_s=target.v_north_m_s - w_north
+        )
     inputs = AgentInputs(t_s=t_s, own=own, target=target, team_positions=tuple(team))
     g, command, events = agent_step(state.guidance, inputs, agent)
-    return replace(state, guidance=g), command, events
+    state = replace(state, guidance=g)
+    if agent.guidance.orbit_plan == "ellipse":
+        state, planned = _orbit_planned(state, t_s, target, agent, wind)
+        events = (*events, *planned)
+    return state, command, events
+
+
+def _orbit_planned(
+    state: MissionAgentState,
+    t_s: float,
+    target: TargetInfo,
+    agent: AgentParams,
+    wind: tuple[float, float] | None,
+) -> tuple[MissionAgentState, tuple[AgentEvent, ...]]:
+    """An ``orbit_planned`` event the first time the circle is not flyable around the target
+    (too fast over the ground, or through the air mass) and the nearest flyable orbit is flown;
+    then, at most every ``_ORBIT_REPORT_S``, when it is flyable again or a semi-axis has moved
+    by more than 8 m since last said (the target's speed is an estimate: the plan moves
+    with it every tick, the log only with what matters)."""
+    rd = agent.guidance.radius_m
+    speed = math.hypot(target.v_east_m_s, target.v_north_m_s)
+    along, across = orbit_axes(speed, agent, rd)
+    circle = along == rd and across == rd
+    last = state.orbit_reported
+    moved = last is not None and max(abs(along - last[0]), abs(across - last[1])) > 8.0
+    unchanged = circle if last is None else not circle and not moved
+    first = last is None and state.orbit_reported_t_s == -math.inf
+    if unchanged or (not first and t_s - state.orbit_reported_t_s < _ORBIT_REPORT_S):
+        return state, ()
+    if circle:
+        detail = f"target {speed:.1f} m/s: the circle r_d = {rd:.0f} m is flyable again"
+    else:
+        frame = "over the ground" if wind is None else "through the air mass"
+        detail = (
+            f"target {speed:.1f} m/s {frame}: the circle r_d = {rd:.0f} m is not flyable at "
+            f"this airframe's limits; flying the nearest flyable orbit, semi-axes "
+            f"{along:.0f} m along its motion, {across:.0f} m across"
+        )
+    reported = None if circle else (along, across)
+    state = replace(state, orbit_reported=reported, orbit_reported_t_s=t_s)
+    return state, (AgentEvent(t_s, "orbit_planned", detail),)
+
+
+_ORBIT_REPORT_S = 20.0
 
 
 def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentParams) -> AgentParams:
