@@ -8,6 +8,7 @@ air), roll the coordinated-turn bank atan(V * course rate / g), pitch 0.
 import math
 from typing import Final
 
+from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.core.frames import wrap_pi
@@ -173,6 +174,23 @@ def vfr_hud(
         alt_amsl_m,
         climb_m_s,
     )
+
+
+def wind_cov(t_s: float, wind_east_m_s: float, wind_north_m_s: float) -> mavlink.MAVLink_message:
+    """PX4's WIND_COV: its EKF's wind, wind_x north and wind_y east (m/s, where the air moves
+    to; MavlinkStreamWindCov sends windspeed_north / windspeed_east so), the horizontal
+    variance, altitudes and accuracies not known (NaN / 0)."""
+    return mavlink.MAVLink_wind_cov_message(
+        round(t_s * 1e6), wind_north_m_s, wind_east_m_s, 0.0, 0.01, 0.0, math.nan, 0.0, 0.0
+    )
+
+
+def ardupilot_wind(wind_east_m_s: float, wind_north_m_s: float) -> mavlink.MAVLink_message:
+    """ArduPilot's WIND (ardupilotmega): the direction the wind comes *from* (degrees, as
+    ArduPilot sends degrees(atan2(-wind.y, -wind.x))), its speed and vertical speed (m/s)."""
+    direction = math.degrees(math.atan2(-wind_east_m_s, -wind_north_m_s))
+    speed = math.hypot(wind_east_m_s, wind_north_m_s)
+    return ardupilotmega.MAVLink_wind_message(direction, speed, 0.0)
 
 
 def global_position_int(

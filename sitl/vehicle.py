@@ -83,7 +83,10 @@ PX4_STREAMS: Final[StreamTable] = {
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: -1.0,  # on request (MAVSDK attitude_quaternion)
+    mavlink.MAVLINK_MSG_ID_WIND_COV: 1.0,  # mavlink_main.cpp: 0.5-1 Hz in the normal modes
 }
+#: ArduPilot's WIND (ardupilotmega, not in common)
+MSG_ID_WIND: Final = 168
 
 Outgoing = tuple[int, mavlink.MAVLink_message]  # (source component id, message)
 GeoLookup = Callable[[], tuple[float, float, float]]  # () -> (lat_deg, lon_deg, alt_amsl_m)
@@ -636,6 +639,10 @@ class SimVehicle:
             return telemetry.attitude(s, t_s)
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
             return telemetry.attitude_quaternion(s, t_s)
+        if msg_id == mavlink.MAVLINK_MSG_ID_WIND_COV:
+            return telemetry.wind_cov(t_s, self.wind_east_m_s, self.wind_north_m_s)
+        if msg_id == MSG_ID_WIND:
+            return telemetry.ardupilot_wind(self.wind_east_m_s, self.wind_north_m_s)
         v_north, v_east = self._ground_velocity()
         climb = self.climb_m_s
         if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:

@@ -52,6 +52,8 @@ from app.runtime.ports import topics
 class MissionSimSetup:
     """A plan and the timing of the loop (s). ``seed`` seeds the cameras; ``camera_sigma2_m2``
     is the per-axis noise variance; ``end_t_s`` defaults to the plan's end. With
+    ``autopilot_wind`` the telemetry carries the wind blowing (as the built-in simulator's PX4
+    and ArduPlane report it, WIND_COV / WIND), else the agents fit their own. With
     ``truth_fed`` the agents steer on the true target (position and velocity, exact, every tick)
     instead of their estimates: what guidance and phase keeping do with perfect knowledge of
     the target (the estimators, the fusion and the stages still run as usual)."""
@@ -65,6 +67,7 @@ class MissionSimSetup:
     estimate_period_s: float = 0.2
     mission_period_s: float = 0.5
     latency_ticks: int = 0
+    autopilot_wind: bool = True
     end_t_s: float | None = None
     track_override: tuple[AgentParams, ...] | None = None
     vehicle_limits: VehicleEnvelope | None = None
@@ -165,15 +168,14 @@ class _Gusts:
         return self.now
 
 
-def _own(v: FixedWingState, wind: tuple[float, float] | None) -> OwnTelemetry:
+def _own(v: FixedWingState, wind: tuple[float, float] | None, reported: bool) -> OwnTelemetry:
     """The vehicle's telemetry: its state in still air; in wind (``v`` air-relative) its ground
-    course and speed, with the airspeed."""
+    course and speed, with the airspeed, and the wind itself where ``reported``."""
     if wind is None:
         return OwnTelemetry(v.east_m, v.north_m, v.course_rad, v.speed_m_s)
     g_e, g_n = v.v_east_m_s + wind[0], v.v_north_m_s + wind[1]
-    return OwnTelemetry(
-        v.east_m, v.north_m, math.atan2(g_e, g_n), math.hypot(g_e, g_n), v.speed_m_s
-    )
+    course, speed = math.atan2(g_e, g_n), math.hypot(g_e, g_n)
+    return OwnTelemetry(v.east_m, v.north_m, course, speed, v.speed_m_s, wind if reported else None)
 
 
 def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
@@ -212,7 +214,8 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         """Statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes;
         then each agent's command."""
         nonlocal gstate
-        owns = [_own(v, gusts.now if blowing else None) for v in vehicles]
+        wind = gusts.now if blowing else None
+        owns = [_own(v, wind, setup.autopilot_wind) for v in vehicles]
         statuses: list[tuple[int, logic.AgentStatus]] = []
         for i, own in enumerate(owns):
             states[i], out = logic.step(states[i], logic.Telemetry(t, own), agents[i])

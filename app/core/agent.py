@@ -226,13 +226,16 @@ class AgentParams:
 class OwnTelemetry:
     """The vehicle's own state: metres east/north of the origin, course (rad, clockwise from
     north), ground speed m/s; the autopilot's airspeed m/s where it reports one (the wind
-    estimate's input, ``guidance.wind``)."""
+    estimate's input, ``guidance.wind``) and its own wind estimate (east, north m/s, where the
+    air moves to) where it sends one (PX4 WIND_COV, ArduPilot WIND), which the mission agent
+    then flies instead of its own fit."""
 
     east_m: float
     north_m: float
     course_rad: float
     speed_m_s: float
     airspeed_m_s: float | None = None
+    wind_m_s: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)

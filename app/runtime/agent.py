@@ -302,6 +302,7 @@ class VehicleAgent:
             frame.course_rad,
             frame.ground_speed_m_s,
             frame.airspeed_m_s,
+            frame.wind_m_s,
         )
         self._frame_wait(frame)
         try:

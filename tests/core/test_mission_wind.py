@@ -15,12 +15,18 @@ WIND = (3.0, -2.0)  # east, north m/s
 
 
 def _fly(
-    params, airspeed_known=True, seconds=40.0, gust=(0.0, 0.0), gust_from_s=math.inf, radius=100.0
+    params,
+    airspeed_known=True,
+    seconds=40.0,
+    gust=(0.0, 0.0),
+    gust_from_s=math.inf,
+    radius=100.0,
+    reported=None,
 ):
     """Control ticks at 10 Hz of a vehicle orbiting its standby point at 14 m/s through the
     air in the wind (the standby loiter: no target yet), with ``gust`` (east, north m/s) added
-    to the wind from ``gust_from_s`` on, on a circle of ``radius`` m about it; the commands
-    and events."""
+    to the wind from ``gust_from_s`` on, on a circle of ``radius`` m about it, the autopilot
+    reporting the wind ``reported`` (None: no estimate of its own); the commands and events."""
     state = logic.initial_agent_state(params)
     commands: list[Command] = []
     events: list[AgentEvent] = []
@@ -36,6 +42,7 @@ def _fly(
             math.atan2(g_e, g_n),
             math.hypot(g_e, g_n),
             14.0 if airspeed_known else None,
+            reported,
         )
         state, out = logic.step(state, logic.Control(t, own), params)
         assert out.command is not None
@@ -102,3 +109,17 @@ def test_a_gust_along_the_track_is_flown_out_by_the_airspeed():
     assert abs(with_gust - without) > 0.8  # the gust matters along the command's course
     assert c.airspeed_m_s == pytest.approx(with_gust, abs=0.25)
     assert calm[-300].airspeed_m_s == gusty[-300].airspeed_m_s  # before the gust: the same
+
+
+def test_the_autopilots_own_wind_is_flown_from_the_first_frame():
+    """An autopilot that reports its wind (PX4 WIND_COV, ArduPilot WIND) is believed at once,
+    with no half turn to fit; a non-finite report is not, and the agent fits its own."""
+    commands, events = _fly(_params("estimate"), seconds=5.0, reported=WIND)
+    assert len(events) == 1
+    assert "3.6 m/s toward 124 deg (the autopilot's estimate)" in events[0].detail
+    c = commands[0]
+    ahead = c.field_course_rad + c.course_rate_ff_rad_s * 1.0
+    assert c.airspeed_m_s == pytest.approx(airspeed_for(ahead, c.speed_m_s, WIND, 10.0, 18.0))
+    commands, events = _fly(_params("estimate"), seconds=40.0, reported=(math.nan, 1.0))
+    assert all(c.airspeed_m_s is None for c in commands[:100])
+    assert "fitted to ground velocity and airspeed" in events[0].detail

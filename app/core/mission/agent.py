@@ -210,8 +210,8 @@ class MissionAgentState:
     #: the wind fit (``MissionAgentParams.wind``) and whether it has been reported known
     wind: wind_fit.WindState = field(default_factory=wind_fit.WindState)
     wind_reported: bool = False
-    #: the newest wind the fit believed and when (held while it does not, ``_fit_wind``)
-    wind_believed: tuple[float, tuple[float, float]] | None = None
+    #: the newest wind believed, when, and whose (held while none is, ``_fit_wind``)
+    wind_believed: tuple[float, tuple[float, float], str] | None = None
     #: the low-passed along-track gust (m/s) and the time of its newest measurement
     gust_m_s: float = 0.0
     gust_t_s: float = -math.inf
@@ -503,8 +503,8 @@ def _over_the_ground(
     speed = math.hypot(*wind)
     toward = math.degrees(math.atan2(wind[0], wind[1])) % 360.0
     detail = (
-        f"{speed:.1f} m/s toward {toward:.0f} deg, from ground velocity and airspeed: "
-        "guidance flies in the air mass (the target moving at its ground velocity less the wind)"
+        f"{speed:.1f} m/s toward {toward:.0f} deg ({_wind_source(state)}): guidance flies "
+        "in the air mass (the target moving at its ground velocity less the wind)"
     )
     return replace(state, wind_reported=True), command, (AgentEvent(t_s, "wind_estimated", detail),)
 
@@ -512,20 +512,32 @@ def _over_the_ground(
 def _fit_wind(
     state: MissionAgentState, t_s: float, own: OwnTelemetry, params: wind_fit.WindParams
 ) -> tuple[MissionAgentState, tuple[float, float] | None]:
-    """The wind fit with this frame, and the wind believed: the fit's, or while it is not
-    believed for a moment (a straight leg, a gusty spell) the last believed one for up to
-    ``hold_s``, so the guidance does not switch frames tick by tick."""
+    """The wind fit with this frame, and the wind believed: the autopilot's own estimate where
+    the frame carries a usable one (finite, within ``max_wind_m_s``), else the fit's, or while
+    the fit is not believed for a moment (a straight leg, a gusty spell) the last believed wind
+    for up to ``hold_s``, so the guidance does not switch frames tick by tick."""
     v_east = own.speed_m_s * math.sin(own.course_rad)
     v_north = own.speed_m_s * math.cos(own.course_rad)
     fit = wind_fit.update(state.wind, t_s, v_east, v_north, own.airspeed_m_s, params)
+    state = replace(state, wind=fit)
+    reported = own.wind_m_s
+    if reported is not None and math.hypot(*reported) <= params.max_wind_m_s:  # NaN: False
+        return replace(state, wind_believed=(t_s, reported, _AUTOPILOT_WIND)), reported
     wind = fit.estimate(params)
     if wind is not None:
-        return replace(state, wind=fit, wind_believed=(t_s, wind)), wind
-    state = replace(state, wind=fit)
+        return replace(state, wind_believed=(t_s, wind, _FITTED_WIND)), wind
     held = state.wind_believed
     if held is not None and 0.0 <= t_s - held[0] <= params.hold_s:
         return state, held[1]
     return state, None
+
+
+_AUTOPILOT_WIND = "the autopilot's estimate"
+_FITTED_WIND = "fitted to ground velocity and airspeed"
+
+
+def _wind_source(state: MissionAgentState) -> str:
+    return _FITTED_WIND if state.wind_believed is None else state.wind_believed[2]
 
 
 def _in_the_wind(
@@ -565,7 +577,7 @@ def _in_the_wind(
     speed = math.hypot(*wind)
     toward = math.degrees(math.atan2(wind[0], wind[1])) % 360.0
     detail = (
-        f"{speed:.1f} m/s toward {toward:.0f} deg, from ground velocity and airspeed: "
+        f"{speed:.1f} m/s toward {toward:.0f} deg ({_wind_source(state)}): "
         "commands carry the airspeed that flies their ground speed in it"
     )
     return replace(state, wind_reported=True), command, (AgentEvent(t_s, "wind_estimated", detail),)

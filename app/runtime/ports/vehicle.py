@@ -96,7 +96,8 @@ class VehicleTelemetry:
     landed state, or a height above home over ``LinkConfig.airborne_altitude_m`` before that
     state arrives. ``link_ok`` is False on the copy of the last frame that is published when the
     link is declared lost. ``airspeed_m_s`` is the autopilot's newest airspeed (VFR_HUD), None
-    when the link has none.
+    when the link has none; ``wind_m_s`` its newest wind estimate (east, north m/s, where the
+    air moves to: PX4 WIND_COV, ArduPilot WIND), None when it sends none or it is stale.
     """
 
     vehicle_id: int
@@ -118,6 +119,7 @@ class VehicleTelemetry:
     in_air: bool
     link_ok: bool = True
     airspeed_m_s: float | None = None
+    wind_m_s: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -65,6 +65,9 @@ from app.runtime.ports.vehicle import (
 
 log = logging.getLogger(__name__)
 
+#: an autopilot wind estimate older than this (wall s) is no longer given with the frames
+WIND_STALE_S = 10.0
+
 
 #: what MAVSDK reports before it has heard the autopilot's HEARTBEAT
 GENERIC_AUTOPILOTS: tuple[Autopilot, ...] = (Autopilot.GENERIC, Autopilot.UNKNOWN)
@@ -171,6 +174,9 @@ class MavsdkVehicleLink:
         self._mission_clock = mission_clock
         self._boot_clock = BootClockMap(config.clock_window_s, config.clock_reset_s)
         self._airspeed_m_s: float | None = None
+        #: the autopilot's newest wind estimate and the monotonic time it came
+        self._wind: tuple[float, float] | None = None
+        self._wind_at_s = -math.inf
         self._gcs_system_id = gcs_system_id
         self._id = system_id
         self._origin = origin
@@ -275,6 +281,7 @@ class MavsdkVehicleLink:
                 "heartbeat": self._read_heartbeat(),
                 "position": self._read_global_position(),
                 "airspeed": self._read_airspeed(),
+                "wind": self._read_wind(name),
                 "health": self._read_health(),
                 "in-air": self._read_in_air(),
                 "observations": self._read_observations(),
@@ -506,7 +513,15 @@ class MavsdkVehicleLink:
             airborne_altitude_m=self._config.airborne_altitude_m,
             t_s=t_s,
             airspeed_m_s=self._airspeed_m_s,
+            wind_m_s=self._current_wind(),
         )
+
+    def _current_wind(self) -> tuple[float, float] | None:
+        """The autopilot's wind, unless it has not come for ``WIND_STALE_S`` (PX4 sends it at
+        0.5-1 Hz, ArduPlane with its EXTRA3 stream)."""
+        if time.monotonic() - self._wind_at_s > WIND_STALE_S:
+            return None
+        return self._wind
 
     def _rebased(self, rebase: Rebase, t_s: float) -> None:
         self.counters.clock_rebases += 1
@@ -541,6 +556,26 @@ class MavsdkVehicleLink:
                     self._airspeed_m_s = telemetry.vfr_hud_airspeed(telemetry.fields(message))
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed("VFR_HUD", exc)
+
+    async def _read_wind(self, adapter: str) -> None:
+        """The autopilot's wind estimate: WIND_COV from PX4, WIND (ardupilotmega) from
+        ArduPilot."""
+        name, decode = (
+            ("WIND", telemetry.ardupilot_wind)
+            if adapter == "arduplane"
+            else ("WIND_COV", telemetry.wind_cov)
+        )
+        async with aclosing(self._direct.subscribe_message(name)) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    wind = decode(telemetry.fields(message))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed(name, exc)
+                    continue
+                if wind is not None:
+                    self._wind, self._wind_at_s = wind, time.monotonic()
 
     async def _read_local_position(self) -> None:
         async with aclosing(self._direct.subscribe_message("LOCAL_POSITION_NED")) as messages:

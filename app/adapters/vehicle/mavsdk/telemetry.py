@@ -53,13 +53,15 @@ def global_position(
     airborne_altitude_m: float,
     t_s: float | None = None,
     airspeed_m_s: float | None = None,
+    wind_m_s: tuple[float, float] | None = None,
 ) -> VehicleTelemetry:
     """GLOBAL_POSITION_INT as a frame in the mission frame (``link_ok`` True).
 
     The course is the ground velocity's direction, or the heading when the vehicle is nearly at
     rest; the vehicle is in the air when its landed state says so or when it is more than
     ``airborne_altitude_m`` above home. ``t_s``: the frame's time (mission time; None: the
-    message's boot time); ``airspeed_m_s``: the newest VFR_HUD airspeed, when the link has one.
+    message's boot time); ``airspeed_m_s``: the newest VFR_HUD airspeed, when the link has one;
+    ``wind_m_s``: the autopilot's newest wind estimate (east, north), when it sends one.
     """
     if t_s is None:
         t_s = time_boot_s(f)
@@ -97,7 +99,30 @@ def global_position(
         in_air=landed_state_in_air or relative_altitude > airborne_altitude_m,
         link_ok=True,
         airspeed_m_s=airspeed_m_s,
+        wind_m_s=wind_m_s,
     )
+
+
+def _wind(east: float, north: float) -> tuple[float, float] | None:
+    if not (math.isfinite(east) and math.isfinite(north)):
+        return None
+    return east, north
+
+
+def wind_cov(f: dict[str, Any]) -> tuple[float, float] | None:
+    """PX4's WIND_COV: the wind (east, north m/s, where the air moves to): wind_x is north and
+    wind_y east (MavlinkStreamWindCov); None while not finite (no estimate yet)."""
+    return _wind(float(f["wind_y"]), float(f["wind_x"]))
+
+
+def ardupilot_wind(f: dict[str, Any]) -> tuple[float, float] | None:
+    """ArduPilot's WIND: ``direction`` is where the wind comes *from* (degrees), ``speed`` m/s;
+    as (east, north) m/s where it blows to. None when not finite or the speed is negative."""
+    speed = float(f["speed"])
+    direction = math.radians(float(f["direction"]))
+    if not (speed >= 0.0 and math.isfinite(direction)):
+        return None
+    return _wind(-speed * math.sin(direction), -speed * math.cos(direction))
 
 
 def vfr_hud_airspeed(f: dict[str, Any]) -> float | None:
