@@ -12,8 +12,8 @@ in the order the live mission does, carrying each outbox to where the bus would:
   ``HeardStatuses`` (one tick: active team, fusion, stage, the recorded sample); the fused
   estimate and the mission state when due -> every agent; the statuses -> teammates' fixes;
   then ``Control`` -> the (course, speed) command, applied to the vehicle after
-  ``latency_ticks`` control periods (0: at once, as the live loop nearly does; 1: one tick
-  late) and held between ticks.
+  ``latency_ticks`` control periods plus ``latency_s`` (rounded to physics steps) late (0: at
+  once, as the live loop nearly does; 1: one tick late) and held until the next one acts.
 
 The plan's ``[sim.wind]`` blows as the built-in simulator blows it (steady plus first-order
 Gauss-Markov gusts per axis, one field for the whole team, seeded by ``seed``); in it the
@@ -67,6 +67,7 @@ class MissionSimSetup:
     estimate_period_s: float = 0.2
     mission_period_s: float = 0.5
     latency_ticks: int = 0
+    latency_s: float = 0.0
     autopilot_wind: bool = True
     end_t_s: float | None = None
     track_override: tuple[AgentParams, ...] | None = None
@@ -88,6 +89,8 @@ class MissionSimSetup:
             raise ValueError("control_period_s must be at least physics_dt_s")
         if self.latency_ticks < 0:
             raise ValueError("latency_ticks must be >= 0")
+        if not (math.isfinite(self.latency_s) and self.latency_s >= 0.0):
+            raise ValueError("latency_s must be finite and >= 0")
         if not (math.isfinite(self.camera_sigma2_m2) and self.camera_sigma2_m2 >= 0.0):
             raise ValueError("camera_sigma2_m2 must be finite and >= 0")
 
@@ -287,6 +290,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         ticks,
         control,
         latency_ticks=setup.latency_ticks,
+        latency_steps=round(setup.latency_s / dt),
         applied=applied,
         stepped=stepped,
         wind=blowing,

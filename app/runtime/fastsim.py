@@ -73,45 +73,44 @@ def fly_team(
     control: Callable[[float, Sequence[FixedWingState]], Commands],
     *,
     latency_ticks: int = 0,
+    latency_steps: int = 0,
     applied: Callable[[float, Commands, Sequence[FixedWingState]], None] | None = None,
     stepped: Callable[[int, Sequence[FixedWingState]], None] | None = None,
     wind: Callable[[int], tuple[float, float]] | None = None,
 ) -> list[FixedWingState]:
     """The stepping loop of every fast simulation: ticks 0..``ticks`` at
     ``t = tick * steps_per_tick * dt_s``; at each, ``control(t, team)`` gives the commands,
-    which act ``latency_ticks`` ticks later (``applied(t sent, commands, team)`` then) and are
-    held over the tick's ``steps_per_tick`` physics steps of ``dt_s`` (eq. 2,
-    ``app.core.plant.step``), after each of which ``stepped(step index from 1, team)`` runs.
-    Before the first commands act, each vehicle holds its start course and speed. Returns the
-    team at the last tick.
+    which act ``latency_ticks`` ticks plus ``latency_steps`` physics steps later
+    (``applied(t sent, commands, team)`` then) and are held until the next ones act, over
+    physics steps of ``dt_s`` (eq. 2, ``app.core.plant.step``), after each of which
+    ``stepped(step index from 1, team)`` runs. Before the first commands act, each vehicle
+    holds its start course and speed. Returns the team at the last tick.
 
     With ``wind`` (physics step index from 0 -> (east, north) m/s blowing during that step) the
     states are air-relative (heading, airspeed; the position over the ground) and a command is
     (ground course, airspeed): each step flies the heading that holds the commanded course over
     the ground in that step's wind (``heading_for_ground_course``, as NPFG and L1 do with their
     wind estimate), so the ground course follows the command and a cross wind costs a crab."""
+    if latency_ticks < 0 or latency_steps < 0:
+        raise ValueError("latencies must be >= 0")
+    delay = latency_ticks * steps_per_tick + latency_steps
     vehicles = list(starts)
-    pending: deque[tuple[float, Commands]] = deque()
+    # (physics step index from which they act, time sent, commands)
+    pending: deque[tuple[int, float, Commands]] = deque()
     held = [(v.course_rad, v.speed_m_s) for v in vehicles]
     step_index = 0
     for tick in range(ticks + 1):
         t = tick * steps_per_tick * dt_s
-        commands = control(t, vehicles)
-        if latency_ticks == 0:
-            held = commands
-            if applied is not None:
-                applied(t, held, vehicles)
-        else:
-            pending.append((t, commands))
-            if len(pending) > latency_ticks:
-                sent_t, held = pending.popleft()
+        pending.append((step_index + delay, t, control(t, vehicles)))
+        for _ in range(steps_per_tick):
+            while pending and pending[0][0] <= step_index:
+                _, sent_t, held = pending.popleft()
+                if len(held) != len(vehicles):
+                    raise ValueError(f"{len(held)} commands for {len(vehicles)} vehicles")
                 if applied is not None:
                     applied(sent_t, held, vehicles)
-        if tick == ticks:
-            break
-        if len(held) != len(vehicles):
-            raise ValueError(f"{len(held)} commands for {len(vehicles)} vehicles")
-        for _ in range(steps_per_tick):
+            if tick == ticks:  # the last tick: what acts now is applied, nothing is flown
+                break
             if wind is None:
                 vehicles = [
                     step(v, c, s, limits, dt_s) for v, (c, s) in zip(vehicles, held, strict=False)

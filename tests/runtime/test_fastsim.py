@@ -11,9 +11,11 @@ from app.config import load_config
 from app.config.scenario import ScenarioConfig, build_setup
 from app.core.agent import AgentState
 from app.core.mission.stage import adjacent_phase_differences
+from app.core.plant import FixedWingState, VehicleEnvelope
 from app.runtime.fastsim import (
     SimulationSetup,
     circle_crossings,
+    fly_team,
     phase_figures,
     phase_lower_bound_s,
     phase_settle_time_s,
@@ -147,3 +149,35 @@ def test_a_clockwise_orbit_is_the_mirror_image_of_sim_a():
     assert standoff_figures(result).settle_s == pytest.approx(
         standoff_figures(reference).settle_s, abs=0.02
     )
+
+
+@pytest.mark.parametrize(("ticks", "steps"), [(0, 0), (0, 3), (1, 0), (2, 7)])
+def test_a_command_acts_its_latency_after_it_was_sent(ticks: int, steps: int) -> None:
+    """Commands act ``latency_ticks`` ticks plus ``latency_steps`` physics steps after the tick
+    that computed them, each until the next one acts; before the first, the start is held."""
+    limits = VehicleEnvelope(14.0, 10.0, 18.0, 2.0, 0.2)
+    acted: list[tuple[float, int]] = []  # (time sent, physics steps done when it acted)
+    done = [0]
+
+    def stepped(index: int, team: Any) -> None:
+        done[0] = index
+
+    def applied(sent_t: float, commands: Any, team: Any) -> None:
+        acted.append((sent_t, done[0]))
+
+    fly_team(
+        [FixedWingState(0.0, 0.0, 0.0, 14.0)],
+        limits,
+        0.02,
+        5,
+        4,
+        lambda t, team: [(0.0, 14.0)],
+        latency_ticks=ticks,
+        latency_steps=steps,
+        applied=applied,
+        stepped=stepped,
+    )
+    delay = 5 * ticks + steps
+    sent = [round(t / 0.1) for t, _ in acted]  # the tick each acting command was sent at
+    assert sent == [j for j in range(5) if 5 * j + delay <= 20]
+    assert all(at == 5 * j + delay for j, (_, at) in zip(sent, acted, strict=True))
