@@ -25,6 +25,7 @@ from app.config.schema import (
     TargetConfig,
 )
 from app.config.simulator import CameraModel, OriginConfig, WindModel
+from app.core.mission.separation import SeparationParams
 from app.errors import ConfigError
 
 Count = Annotated[int, Field(ge=1, le=50)]
@@ -82,6 +83,33 @@ class StagesConfig(StrictModel):
     spacing_tolerance_deg: Positive = 2.0
     dwell_s: NonNegative = 5.0
     moving_speed_m_s: Positive = 1.5
+
+
+class SeparationConfig(StrictModel):
+    """Keeping the team apart (``app.core.mission.separation``): no two vehicles closer than
+    ``min_distance_m`` in 3-D. Each agent looks ``look_ahead_s`` ahead on its teammates'
+    statuses; one closer than ``min_distance_m`` vertically whose predicted closest approach
+    comes within ``min_distance_m + margin_m`` horizontally is turned away from (the nearest
+    course that keeps the guard, right first), and a teammate horizontally near is never
+    climbed or descended into (kept ``min_distance_m + vertical_margin_m`` apart). ``enabled =
+    false`` flies the guidance alone (the altitude stack, ``[link] altitude_stack_m``, is then
+    the only separation)."""
+
+    enabled: bool = True
+    min_distance_m: Positive = 30.0
+    margin_m: NonNegative = 15.0
+    vertical_margin_m: NonNegative = 5.0
+    look_ahead_s: Annotated[float, Field(gt=0.0, le=60.0, allow_inf_nan=False)] = 12.0
+
+    def build(self) -> SeparationParams | None:
+        if not self.enabled:
+            return None
+        return SeparationParams(
+            min_distance_m=self.min_distance_m,
+            margin_m=self.margin_m,
+            vertical_margin_m=self.vertical_margin_m,
+            look_ahead_s=self.look_ahead_s,
+        )
 
 
 class ObservationsConfig(StrictModel):
@@ -224,6 +252,7 @@ class MissionConfig(StrictModel):
     phase: MissionPhaseConfig = MissionPhaseConfig()
     standby: StandbyConfig
     stages: StagesConfig = StagesConfig()
+    separation: SeparationConfig = SeparationConfig()
     target: TargetConfig
     observations: ObservationsConfig = ObservationsConfig()
     estimator: EstimatorSettings = EstimatorSettings()

@@ -102,6 +102,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 ),
                 fly_identified=g.course_loop_identification == "fly",
                 wind=None if g.wind == "off" else WindParams(air_frame=g.wind == "estimate"),
+                separation=config.separation.build(),
             )
             for i in range(n)
         )

@@ -228,7 +228,8 @@ class OwnTelemetry:
     north), ground speed m/s; the autopilot's airspeed m/s where it reports one (the wind
     estimate's input, ``guidance.wind``) and its own wind estimate (east, north m/s, where the
     air moves to) where it sends one (PX4 WIND_COV, ArduPilot WIND), which the mission agent
-    then flies instead of its own fit."""
+    then flies instead of its own fit. ``up_m``: its height about the origin where known (the
+    separation guard's input, ``mission.separation``)."""
 
     east_m: float
     north_m: float
@@ -236,6 +237,7 @@ class OwnTelemetry:
     speed_m_s: float
     airspeed_m_s: float | None = None
     wind_m_s: tuple[float, float] | None = None
+    up_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -297,7 +299,10 @@ class Command:
     wind is known (``guidance.wind``), the airspeed that flies it there, within the airframe's
     limits: what an autopilot whose speed setpoint is an airspeed is to be given.
     ``actuator`` is the phase actuator that acted and ``radius_m`` the radius the field was
-    flown around (r_d, or the radius actuator's r_eff; 0: not stated).
+    flown around (r_d, or the radius actuator's r_eff; 0: not stated). ``min_up_m`` /
+    ``max_up_m``: the band of heights about the origin the vehicle must keep to for
+    separation (``mission.separation``; None: no bound), which the altitude it is sent is
+    held to.
     """
 
     course_rad: float
@@ -309,6 +314,8 @@ class Command:
     actuator: PhaseActuator = "speed"
     radius_m: float = 0.0
     airspeed_m_s: float | None = None
+    min_up_m: float | None = None
+    max_up_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

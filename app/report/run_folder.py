@@ -29,6 +29,7 @@ TRACK_EXTRA_COLUMNS = (
     "stage",
     "segment",
     "outage",
+    "up_m",
 )
 CONFIG_FILE = "config.json"
 TRACK_FILE = "track.csv"
@@ -75,6 +76,7 @@ def write_run_folder(
                 s.stage,
                 s.target_segment,
                 mark,
+                nan if v.up_m is None else v.up_m,
             ),
         )
         for s, mark in zip(samples, outage_marks([s.t_s for s in samples], outages), strict=True)
@@ -181,6 +183,14 @@ def _float(row: Mapping[str, str], name: str, path: Path, line: int) -> float:
 _TRACK_NEEDS = {"t_s", "vehicle", "east_m", "north_m", "course_rad", "speed_m_s", "stage"}
 
 
+def _up(row: dict[str, str], path: Path, line: int) -> float | None:
+    """The row's height about the origin; None where it has none (older folders, or nan)."""
+    if not row.get("up_m"):
+        return None
+    up = _float(row, "up_m", path, line)
+    return up if math.isfinite(up) else None
+
+
 def read_track_samples(path: Path) -> list[TeamSample]:
     """A run folder's ``track.csv`` back as the ground's samples (one per time). Not in the
     file: the target's velocity (0 here) and the estimate's (0); ``segment`` is '' in folders
@@ -215,6 +225,7 @@ def read_track_samples(path: Path) -> list[TeamSample]:
                 _float(row, "north_m", path, ln),
                 _float(row, "speed_m_s", path, ln),
                 _float(row, "course_rad", path, ln),
+                _up(row, path, ln),
             )
             for row, ln in rows
         )

@@ -167,8 +167,38 @@ def summarize(
         "spacing_tolerance_deg": math.degrees(spacing_tolerance_rad),
         "hold_s": hold_s,
     }
-    return {
+    out: dict[str, Any] = {
         "schema_version": SUMMARY_SCHEMA_VERSION,
         "parts": out_parts,
         "convergence": convergence,
+    }
+    separation = closest_pair(rows)
+    if separation is not None:
+        out["separation"] = separation
+    return out
+
+
+def closest_pair(samples: Sequence[TeamSample]) -> dict[str, Any] | None:
+    """The least 3-D distance between two vehicles over the samples (of those whose height
+    is known): metres, when (s of mission time), which pair (numbered from 1), and the
+    horizontal and vertical parts; None without two heights at any one time."""
+    best: tuple[float, float, int, int, float, float] | None = None
+    for s in samples:
+        known = [(v, v.up_m) for v in s.vehicles if v.up_m is not None]
+        for i, (a, a_up) in enumerate(known):
+            for b, b_up in known[i + 1 :]:
+                h = math.hypot(a.east_m - b.east_m, a.north_m - b.north_m)
+                z = abs(a_up - b_up)
+                d = math.hypot(h, z)
+                if best is None or d < best[0]:
+                    best = (d, s.t_s, a.vehicle, b.vehicle, h, z)
+    if best is None:
+        return None
+    d, t, a_id, b_id, h, z = best
+    return {
+        "min_distance_m": round(d, 2),
+        "t_s": round(t, 2),
+        "pair": sorted([vehicle_key(a_id), vehicle_key(b_id)]),
+        "horizontal_m": round(h, 2),
+        "vertical_m": round(z, 2),
     }

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 from app.core.agent import (
     ActuatorChoice,
     AgentParams,
+    Command,
     OwnTelemetry,
     PhaseActuator,
     resolve_actuator,
@@ -303,6 +304,7 @@ class VehicleAgent:
             frame.ground_speed_m_s,
             frame.airspeed_m_s,
             frame.wind_m_s,
+            frame.up_m,
         )
         self._frame_wait(frame)
         try:
@@ -333,13 +335,26 @@ class VehicleAgent:
                     CourseSpeedCommand(
                         c.course_rad,
                         speed,
-                        self._runtime.altitude_m,
+                        self._altitude(frame, c),
                         course_rate_rad_s=self._feed_forward(rate),
                     ),
                 )
         self.state, out = self._step(logic.Telemetry(t, own), self.params)
         if out.status is not None:
             await self._publish_status(out.status)
+
+    def _altitude(self, frame: VehicleTelemetry, command: Command) -> float | None:
+        """The altitude to hold (above home): the vehicle's place in the stack, held to the
+        separation guard's band of heights (about the origin) while a teammate is near."""
+        altitude = self._runtime.altitude_m
+        if altitude is None or (command.min_up_m is None and command.max_up_m is None):
+            return altitude
+        home_up = frame.up_m - frame.relative_altitude_m  # home's height about the origin
+        if command.max_up_m is not None:
+            altitude = min(altitude, command.max_up_m - home_up)
+        if command.min_up_m is not None:
+            altitude = max(altitude, command.min_up_m - home_up)
+        return altitude
 
     async def _silent_hold(self, t: float) -> None:
         """The ground station went silent for too long: the vehicle holds (the rule of
@@ -464,6 +479,7 @@ class VehicleAgent:
             east_m=status.east_m,
             north_m=status.north_m,
             alt_m=latest.relative_altitude_m if latest is not None else 0.0,
+            up_m=latest.up_m if latest is not None else None,
             course_rad=status.course_rad,
             speed_m_s=status.speed_m_s,
             phase_rad=status.phase_rad,
@@ -601,6 +617,7 @@ class VehicleAgent:
                     message.north_m,
                     message.course_rad,
                     message.speed_m_s,
+                    message.up_m,
                 )
                 teammate = logic.HeardTeammate(message.vehicle, fix)
                 self.state, out = self._step(teammate, self.params)

@@ -300,6 +300,7 @@ class GroundStation:
                     # flown by its pilot: heard (not lost), but out of the formation until
                     # its agent is told to resume
                     healthy=message.healthy and message.control != "pilot",
+                    up_m=message.up_m,
                 )
                 now = self._now()
                 if self._recorder is not None:

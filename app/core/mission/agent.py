@@ -52,9 +52,11 @@ from app.core.estimation.federated import MainParams, apply_feedback
 from app.core.estimation.local import LocalParams, LocalState, StepReport, local_step
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate, Observation
 from app.core.estimation.models import MotionModel
+from app.core.frames import wrap_pi
 from app.core.guidance import course_id as cid
 from app.core.guidance import wind as wind_fit
 from app.core.mission.schedule import Every
+from app.core.mission.separation import SeparationParams, Traffic, resolve
 from app.core.mission.stage import Stage
 from app.core.mission.team import dead_reckon
 
@@ -63,13 +65,15 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True, slots=True)
 class TeammateFix:
-    """Where a teammate was at ``t_s`` (m, rad clockwise from north, m/s)."""
+    """Where a teammate was at ``t_s`` (m, rad clockwise from north, m/s; ``up_m`` its height
+    about the origin, None where its status has none)."""
 
     t_s: float
     east_m: float
     north_m: float
     course_rad: float
     speed_m_s: float
+    up_m: float | None = None
 
     def at(self, t_s: float, max_extrapolation_s: float) -> tuple[float, float]:
         """Position dead-reckoned to ``t_s`` along the last course (at most the given span)."""
@@ -121,6 +125,11 @@ class MissionAgentParams:
     delay where it exceeds ``latency_s``; the flown loop is rebuilt (and reported) only when k
     moves by more than ``course_id_change`` (a fraction) or the delay changes. Without
     ``fly_identified`` the loop is identified and reported only. None: off.
+
+    Separation (issue #13): with ``separation`` every command is checked against the
+    teammates' statuses (``mission.separation``) and turned away from, or held in height
+    below or above, a teammate it would come too close to (events ``separation`` and
+    ``separation_clear``). None: off.
     """
 
     vehicle: int
@@ -144,6 +153,7 @@ class MissionAgentParams:
     fused_gate_nis: float = 50.0
     ground_silent_hold_s: float = 60.0
     wind: wind_fit.WindParams | None = None
+    separation: SeparationParams | None = None
 
     def __post_init__(self) -> None:
         for name in ("max_ahead_s", "fused_gate_nis", "ground_silent_hold_s"):
@@ -219,6 +229,13 @@ class MissionAgentState:
     #: and when
     orbit_reported: tuple[float, float] | None = None
     orbit_reported_t_s: float = -math.inf
+    #: the separation guard (``_separate``): the teammates acted on the tick before, the
+    #: teammate turned away from and whether a height band is held in this episode, and
+    #: when the guard last acted (an episode ends ``_SEPARATION_QUIET_S`` after)
+    separation_near: frozenset[int] = frozenset()
+    separation_threat: int | None = None
+    separation_band: bool = False
+    separation_acted_t_s: float = -math.inf
 
 
 def initial_agent_state(
@@ -447,10 +464,108 @@ def control(
             state, t_s, own, command, flown, known_wind, params.wind
         )
         events = (*events, *known)
+    if params.separation is not None and own.up_m is not None:
+        state, command, apart = _separate(state, t_s, own, command, params, params.separation)
+        events = (*events, *apart)
     if params.course_id is not None:
         state, learned = _identify(state, t_s, own, command, params, params.course_id)
         events = (*events, *learned)
     return state, command, events
+
+
+def _separate(
+    state: MissionAgentState,
+    t_s: float,
+    own: OwnTelemetry,
+    command: Command,
+    params: MissionAgentParams,
+    separation: SeparationParams,
+) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
+    """The command kept apart from the teammates (``mission.separation``): its course turned
+    away from a threat, its height band set. Events: ``separation`` when an episode starts
+    and when it turns away from another teammate or first holds a height in it,
+    ``separation_clear`` once the guard has not acted for ``_SEPARATION_QUIET_S``."""
+    traffic = []
+    for vehicle, fix in state.teammates:
+        if vehicle == params.vehicle or abs(t_s - fix.t_s) > separation.max_age_s:
+            continue
+        east, north = fix.at(t_s, separation.max_age_s)
+        traffic.append(Traffic(vehicle, east, north, fix.up_m, fix.course_rad, fix.speed_m_s))
+    assert own.up_m is not None
+    r = resolve(
+        own.east_m,
+        own.north_m,
+        own.up_m,
+        own.course_rad,
+        own.speed_m_s,
+        command.course_rad,
+        traffic,
+        params.agent.envelope.max_course_rate_rad_s,
+        separation,
+        state.separation_near,
+    )
+    events: list[AgentEvent] = []
+    band = r.min_up_m is not None or r.max_up_m is not None
+    if r.threat is not None:
+        if r.threat != state.separation_threat:
+            turn = math.degrees(wrap_pi(r.course_rad - own.course_rad))
+            events.append(
+                AgentEvent(
+                    t_s,
+                    "separation",
+                    f"vehicle {r.threat + 1} predicted {r.closest_m:.0f} m away within "
+                    f"{separation.look_ahead_s:g} s: turning to course "
+                    f"{math.degrees(r.course_rad) % 360.0:.0f} deg ({turn:+.0f} deg from its own)",
+                )
+            )
+        command = replace(
+            command,
+            course_rad=r.course_rad,
+            field_course_rad=r.course_rad,
+            course_rate_ff_rad_s=0.0,
+        )
+        if state.last_command is not None and params.wind is None:
+            state = replace(state, last_command=(r.course_rad, command.speed_m_s))
+    if band:
+        if not state.separation_band:
+            limits = []
+            if r.max_up_m is not None:
+                limits.append(f"at most {r.max_up_m:.0f} m")
+            if r.min_up_m is not None:
+                limits.append(f"at least {r.min_up_m:.0f} m")
+            events.append(
+                AgentEvent(
+                    t_s,
+                    "separation",
+                    f"a teammate is near: height held {' and '.join(limits)} above the origin "
+                    f"(now {own.up_m:.0f} m)",
+                )
+            )
+        command = replace(command, min_up_m=r.min_up_m, max_up_m=r.max_up_m)
+    if r.acted:
+        state = replace(
+            state,
+            separation_near=r.near,
+            separation_threat=r.threat if r.threat is not None else state.separation_threat,
+            separation_band=state.separation_band or band,
+            separation_acted_t_s=t_s,
+        )
+    elif state.separation_near:
+        state = replace(state, separation_near=frozenset())
+    episode = state.separation_threat is not None or state.separation_band
+    if episode and not r.acted and t_s - state.separation_acted_t_s >= _SEPARATION_QUIET_S:
+        events.append(
+            AgentEvent(
+                t_s,
+                "separation_clear",
+                f"no teammate near for {_SEPARATION_QUIET_S:g} s",
+            )
+        )
+        state = replace(state, separation_threat=None, separation_band=False)
+    return state, command, tuple(events)
+
+
+_SEPARATION_QUIET_S = 5.0
 
 
 def _through_the_air(own: OwnTelemetry, wind: tuple[float, float]) -> OwnTelemetry:

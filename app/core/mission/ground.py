@@ -39,7 +39,8 @@ from app.core.target import TargetMotion
 
 @dataclass(frozen=True, slots=True)
 class VehicleReport:
-    """The newest status of one vehicle (m, rad clockwise from north, m/s)."""
+    """The newest status of one vehicle (m, rad clockwise from north, m/s; ``up_m`` its height
+    about the origin, None where its status has none)."""
 
     t_s: float
     east_m: float
@@ -48,6 +49,7 @@ class VehicleReport:
     speed_m_s: float
     link_ok: bool = True
     healthy: bool = True
+    up_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -494,6 +496,7 @@ def team_sample(
             ),
             r.speed_m_s,
             r.course_rad,
+            r.up_m,
         )
         for v, r in state.reports
     )

@@ -31,6 +31,7 @@ class VehicleSample:
     north_m: float
     speed_m_s: float
     course_rad: float = 0.0
+    up_m: float | None = None  # height about the origin, where known
 
 
 @dataclass(frozen=True, slots=True)

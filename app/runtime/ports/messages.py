@@ -214,7 +214,8 @@ class VehicleStatus(Message):
     vehicle: VehicleId
     east_m: Finite
     north_m: Finite
-    alt_m: Finite
+    alt_m: Finite  # above the vehicle's home
+    up_m: Finite | None = None  # height about the mission origin (separation, 3-D)
     course_rad: Finite  # MAVLink convention: clockwise from north
     speed_m_s: NonNegative
     phase_rad: Finite  # the vehicle's phase angle about the target estimate
