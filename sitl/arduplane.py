@@ -28,6 +28,9 @@ whose default is the real behaviour):
   error, limited to atan(param3 / g) (param3 the lateral acceleration limit, at least 0.05 m/s^2)
   and to ROLL_LIMIT_DEG (45; LIM_ROLL_CD before 4.5); the turn is the coordinated one,
   course rate = g tan(bank) / V. At 14 m/s the small-error gain is about 0.6 /s, not 1 /s.
+  The bank reaches the demanded one through the roll controller, whose angle loop is first
+  order with RLL2SRV_TCONST (0.5 s; libraries/APM_Control/AP_RollController.cpp: desired
+  roll rate = angle error / tau), so the loop lags the course command by about half a second.
 - GCS failsafe (``arduplane_gcs_seen_at_boot``): the last heartbeat from SYSID_MYGCS starts at
   the autopilot's boot (ArduPlane/system.cpp ``init_ardupilot``: "reset last heartbeat time"),
   so FS_GCS_ENABL set more than FS_LONG_TIMEOUT after boot, before a heartbeat from the GCS has
@@ -101,6 +104,8 @@ PARAM_AIRSPEED_MAX: Final = "AIRSPEED_MAX"
 # GUIDED's heading PID's P (AP_Float, centidegrees of bank per radian; Parameters.h
 # ``guidedHeading{5000.0, ...}``) and the bank limit (aparm.roll_limit, AP_Float, degrees)
 PARAM_GUIDED_P: Final = "GUIDED_P"
+#: the roll controller's time constant (s; AP_RollController ``gains.tau``, "RLL2SRV_TCONST")
+ROLL_TIME_CONSTANT_S: Final = 0.5
 PARAM_ROLL_LIMIT_DEG: Final = "ROLL_LIMIT_DEG"
 GUIDED_P_DEFAULT: Final = 5000.0
 ROLL_LIMIT_DEG_DEFAULT: Final = 45.0
@@ -308,6 +313,8 @@ class ArduPlaneAutopilot:
         self._origin_alt_m = sim.origin_alt_m
         self._streams = arduplane_streams(sim.arduplane_stream_rate_hz)
         self._heading_pid = sim.arduplane_guided_heading == "pid"
+        #: the bank the airframe flies (rad, > 0 right), lagging GUIDED's demand
+        self._bank_rad = 0.0
         self._rebase = sim.arduplane_guided_rebase
         self._reset_guided()
         failsafe = sim.gcs_failsafe
@@ -703,15 +710,17 @@ class ArduPlaneAutopilot:
         if v.mode == GUIDED:
             command = self._guided_command(v, command)
         course, speed = guide(v.state, command, limits.course_gain_per_s)
+        speed_now = max(v.state.speed_m_s, limits.min_speed_m_s)
         if isinstance(command, CourseCommand) and self._heading_pid:
-            rate = self.guided_course_rate_rad_s(v, command)
+            demand = self.guided_bank_rad(v, command)
+            self._bank_rad += (demand - self._bank_rad) * -math.expm1(-dt_s / ROLL_TIME_CONSTANT_S)
+            rate = GRAVITY_M_S2 * math.tan(self._bank_rad) / speed_now
             rate = max(-limits.max_course_rate_rad_s, min(limits.max_course_rate_rad_s, rate))
             course = v.state.course_rad + rate / limits.course_gain_per_s
         elif isinstance(command, CourseCommand):
             course = heading_for_ground_course(
                 course, v.state.speed_m_s, v.wind_east_m_s, v.wind_north_m_s
             )
-            speed_now = max(v.state.speed_m_s, limits.min_speed_m_s)
             rate = min(limits.max_course_rate_rad_s, command.max_lateral_accel_m_s2 / speed_now)
             limits = replace(limits, max_course_rate_rad_s=rate)
         if v.mode == GUIDED and self._guided_speed_m_s is not None:
@@ -719,6 +728,9 @@ class ArduPlaneAutopilot:
                 limits, max_accel_m_s2=min(limits.max_accel_m_s2, self._guided_accel_m_s2)
             )
         v.step(course, speed, limits, dt_s)
+        if not (isinstance(command, CourseCommand) and self._heading_pid):
+            # the bank of the turn the other modes fly, where a GUIDED heading loop takes over
+            self._bank_rad = math.atan(v.state.course_rate_rad_s * speed_now / GRAVITY_M_S2)
 
     def guided_bank_rad(self, v: SimVehicle, command: CourseCommand) -> float:
         """ModeGuided::update: bank = GUIDED_P * (course over ground error), limited to
@@ -735,7 +747,8 @@ class ArduPlaneAutopilot:
         return max(-limit, min(limit, bank))
 
     def guided_course_rate_rad_s(self, v: SimVehicle, command: CourseCommand) -> float:
-        """The coordinated turn at the GUIDED bank: g tan(bank) / V."""
+        """The coordinated turn at the GUIDED bank demanded: g tan(bank) / V (the airframe gets
+        there through the roll controller's lag, ``ROLL_TIME_CONSTANT_S``)."""
         speed = max(v.state.speed_m_s, v.config.limits.min_speed_m_s)
         return GRAVITY_M_S2 * math.tan(self.guided_bank_rad(v, command)) / speed
 

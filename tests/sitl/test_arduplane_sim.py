@@ -174,10 +174,12 @@ def test_guided_turn_is_limited_by_the_lateral_acceleration_and_flies_the_target
         -math.pi, abs=1e-3
     ) or v.state.course_rad == pytest.approx(math.pi, abs=1e-3)
     assert v.altitude_m == pytest.approx(110.0)  # 10 m at 2 m/s: reached within the 50 s
-    # param3 0 is taken as 0.05 m/s^2: a turn of a few thousandths of a rad/s
+    # param3 0 is taken as 0.05 m/s^2: a turn of a few thousandths of a rad/s (once the bank
+    # has come down through the roll controller's lag)
     assert command_int(v, MAV_CMD_GUIDED_CHANGE_HEADING, 0, 90.0, 0.0) == ACCEPTED
-    v.advance(dt, 60.0, 60.0, 0.0, 0.0)
-    assert abs(v.state.course_rate_rad_s) == pytest.approx(0.05 / 18.0)
+    for k in range(200):
+        v.advance(dt, 60.0 + k * dt, 60.0 + k * dt, 0.0, 0.0)
+    assert abs(v.state.course_rate_rad_s) == pytest.approx(0.05 / 18.0, rel=1e-3)
 
 
 def test_course_over_ground_is_held_in_a_cross_wind():
