@@ -7,7 +7,9 @@ cruise in [10, 18] m/s, |a| <= 2 m/s^2, 0.2 rad/s; bunched 15 degrees apart on t
 the seat law at k = 0.1, predictive) in the fast simulation, once with ``actuator = "speed"``
 (the speed law commands its speed) and once with ``actuator = "radius"`` (cruise speed held, as
 PX4 fixed-wing offboard holds its trim airspeed; the wanted speed flown as an orbit radius within
-15 m of r_d), around a stationary target and around targets driving east at 1.5 and 3 m/s.
+15 m of r_d), around a stationary target and around targets driving east at 1.5 and 3 m/s;
+around a moving target also with ``radius_phase = "polar"`` (the radius keeps the polar angles
+spaced, not the orbit-time phases).
 
 Prints for each: the spacing settle time (every adjacent gap within 5 and within 2 degrees of
 120 for good), the time every vehicle is within 3 m of r_d for good, and the RMS spacing error
@@ -18,6 +20,7 @@ whole run and over its last part (from ``--steady-from`` s), with the radius/spe
 import argparse
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,9 +78,13 @@ def _target(speed_m_s: float, duration_s: float) -> TargetConfig:
 
 
 def _fly(
-    base: ScenarioConfig, actuator: str, target_speed_m_s: float, steady_from_s: float
+    base: ScenarioConfig,
+    actuator: str,
+    target_speed_m_s: float,
+    steady_from_s: float,
+    radius_phase: str = "orbit_time",
 ) -> Figures:
-    phase = base.phase.model_copy(update={"actuator": actuator})
+    phase = base.phase.model_copy(update={"actuator": actuator, "radius_phase": radius_phase})
     target = _target(target_speed_m_s, base.duration_s)
     scenario = base.model_copy(update={"phase": phase, "target": target})
     setup = build_setup(scenario)
@@ -96,6 +103,19 @@ def _ratio(a: float, b: float) -> str:
 
 def _t(value: float) -> str:
     return "never" if math.isinf(value) else f"{value:6.1f} s"
+
+
+def _row(
+    label: str, pick: Callable[[Figures], float], is_time: bool, variants: list[Figures]
+) -> None:
+    """One figure of each variant, and each's ratio to the first (by speed)."""
+    fmt = _t if is_time else (lambda x: f"{x:8.2f}")
+    first = pick(variants[0])
+    line = f"  {label:34s} {fmt(first):>12s}"
+    for f in variants[1:]:
+        value = pick(f)
+        line += f" {fmt(value):>12s}  {_ratio(value, first):>12s}"
+    print(line)
 
 
 def main() -> None:
@@ -119,41 +139,29 @@ def main() -> None:
     for speed in args.target_speeds:
         by_speed = _fly(base, "speed", speed, args.steady_from)
         by_radius = _fly(base, "radius", speed, args.steady_from)
+        polar = _fly(base, "radius", speed, args.steady_from, "polar") if speed > 0.0 else None
         where = "stationary target" if speed == 0.0 else f"target driving east at {speed} m/s"
         print(f"\n{where}")
-        print(f"  {'':34s} {'speed':>12s} {'radius':>12s}  radius/speed")
-        rows = [
-            ("spaced within 5 deg", by_speed.spaced_5_s, by_radius.spaced_5_s, True),
-            ("spaced within 2 deg", by_speed.spaced_2_s, by_radius.spaced_2_s, True),
-            ("within 3 m of r_d", by_speed.on_circle_s, by_radius.on_circle_s, True),
-            ("RMS spacing error, deg", by_speed.spacing_rms_deg, by_radius.spacing_rms_deg, False),
-            ("RMS distance error, m", by_speed.distance_rms_m, by_radius.distance_rms_m, False),
-            (
-                f"RMS spacing error t>={args.steady_from:.0f} s, deg",
-                by_speed.steady_spacing_rms_deg,
-                by_radius.steady_spacing_rms_deg,
-                False,
-            ),
-            (
-                f"RMS distance error t>={args.steady_from:.0f} s, m",
-                by_speed.steady_distance_rms_m,
-                by_radius.steady_distance_rms_m,
-                False,
-            ),
+        head = f"  {'':34s} {'speed':>12s} {'radius':>12s}  radius/speed"
+        print(head + (f" {'polar':>12s}  polar/speed" if polar else ""))
+
+        variants = [by_speed, by_radius] + ([polar] if polar is not None else [])
+
+        _row("spaced within 5 deg", lambda f: f.spaced_5_s, True, variants)
+        _row("spaced within 2 deg", lambda f: f.spaced_2_s, True, variants)
+        _row("within 3 m of r_d", lambda f: f.on_circle_s, True, variants)
+        _row("RMS spacing error, deg", lambda f: f.spacing_rms_deg, False, variants)
+        _row("RMS distance error, m", lambda f: f.distance_rms_m, False, variants)
+        steady = f"t>={args.steady_from:.0f} s"
+        _row(
+            f"RMS spacing error {steady}, deg", lambda f: f.steady_spacing_rms_deg, False, variants
+        )
+        _row(f"RMS distance error {steady}, m", lambda f: f.steady_distance_rms_m, False, variants)
+        flown = [
+            f"{f.speed_range_m_s[0]:.1f}-{f.speed_range_m_s[1]:.1f}" for f in (by_speed, by_radius)
         ]
-        for label, a, b, is_time in rows:
-            sa, sb = (_t(a), _t(b)) if is_time else (f"{a:8.2f}", f"{b:8.2f}")
-            print(f"  {label:34s} {sa:>12s} {sb:>12s}  {_ratio(b, a)}")
-        lo_a, hi_a = by_speed.speed_range_m_s
-        lo_b, hi_b = by_radius.speed_range_m_s
-        print(
-            f"  {'speed flown, m/s':34s} {f'{lo_a:.1f}-{hi_a:.1f}':>12s} "
-            f"{f'{lo_b:.1f}-{hi_b:.1f}':>12s}"
-        )
-        print(
-            f"  {'CPU, s':34s} {by_speed.cpu_s:12.2f} {by_radius.cpu_s:12.2f}  "
-            f"{_ratio(by_radius.cpu_s, by_speed.cpu_s)}"
-        )
+        print(f"  {'speed flown, m/s':34s} {flown[0]:>12s} {flown[1]:>12s}")
+        _row("CPU, s", lambda f: f.cpu_s, False, variants)
 
 
 if __name__ == "__main__":

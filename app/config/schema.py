@@ -203,6 +203,7 @@ class PhaseConfig(StrictModel):
     predictive: bool = True
     actuator: Literal["auto", "speed", "radius"] = "auto"
     radius_band_m: Positive = 15.0
+    radius_phase: Literal["orbit_time", "polar"] = "orbit_time"
 
     def build(self, honours_speed: bool = True) -> PhaseParams:
         """The core's phase parameters, ``auto`` resolved for a vehicle that does (default) or
@@ -213,6 +214,7 @@ class PhaseConfig(StrictModel):
             predictive=self.predictive,
             actuator=resolve_actuator(self.actuator, honours_speed),
             radius_band_m=self.radius_band_m,
+            radius_phase=self.radius_phase,
         )
 
     def check_band(self, radius_m: float) -> None:

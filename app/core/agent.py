@@ -38,6 +38,8 @@ Orbit = Literal["ccw", "cw"]
 FieldMode = Literal["field", "inverse"]
 OrbitPlan = Literal["circle", "ellipse"]
 PhaseActuator = Literal["speed", "radius"]
+#: what the radius actuator keeps spaced around a moving target (``PhaseParams.radius_phase``)
+RadiusPhase = Literal["orbit_time", "polar"]
 ActuatorChoice = Literal["auto", "speed", "radius"]
 
 FREW_C = 2.0
@@ -149,6 +151,13 @@ class PhaseParams:
     on the orbit-time phase theta + v_t . r_hat / s (first order in v_t / s): a team spaced in
     it stays on r_d, and its polar angles swing by up to sqrt(3) v_t / s rad about 2 pi / 3 (for
     three), which no vehicle at a fixed speed on one circle can avoid.
+
+    ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
+    too: at ground speed s on a circle around a target moving at v_t the relative speed along
+    the orbit is u = -v_t . t_hat + sqrt(s^2 - (v_t . r_hat)^2), so the polar rate u / r is the
+    wanted one omega_w = v_w / r_d on r_eff = u / omega_w, which swings by about v_t / omega_w
+    round the orbit (18 m at 3 m/s and 15 m/s on 90 m) where the band allows it; the slew limit
+    grows by |v_t| to follow it.
     """
 
     law: PhaseLaw = "paper"
@@ -158,6 +167,7 @@ class PhaseParams:
     radius_band_m: float = 15.0
     radius_rate_m_s: float = 1.0
     radius_step_m: float = 0.5
+    radius_phase: RadiusPhase = "orbit_time"
 
     def __post_init__(self) -> None:
         if self.law not in ("paper", "frew", "none"):
@@ -167,6 +177,11 @@ class PhaseParams:
         if self.actuator not in ("speed", "radius"):
             raise ValueError(
                 f"PhaseParams.actuator must be 'speed' or 'radius', got {self.actuator!r}"
+            )
+        if self.radius_phase not in ("orbit_time", "polar"):
+            raise ValueError(
+                f"PhaseParams.radius_phase must be 'orbit_time' or 'polar', got "
+                f"{self.radius_phase!r}"
             )
         require_positive(
             "PhaseParams",
@@ -441,7 +456,9 @@ def _speed_command(
     # orbit; steer on the orbit-time phase theta + v_t . r_hat / s instead (first order in
     # v_t / s), which a team at s on one circle advances evenly
     tv_e, tv_n = inputs.target.v_east_m_s, inputs.target.v_north_m_s
-    time_phase = ph.actuator == "radius" and (tv_e != 0.0 or tv_n != 0.0)
+    time_phase = (
+        ph.actuator == "radius" and ph.radius_phase == "orbit_time" and (tv_e != 0.0 or tv_n != 0.0)
+    )
     inv_s = 1.0 / env.cruise_speed_m_s
     phases: list[float] = []
     own_r = 0.0
@@ -504,6 +521,28 @@ def _effective_radius(
     return min(max(r, lower), upper)
 
 
+def _polar_radius(
+    inputs: AgentInputs, params: AgentParams, v_wanted_m_s: float, lower: float, upper: float
+) -> float:
+    """r_eff = u / omega_w (``PhaseParams.radius_phase = "polar"``): the radius on which the
+    relative speed along the orbit at cruise ground speed, u, gives the polar rate the speed
+    law wants, v_w / r_d; clamped to [lower, upper]."""
+    if not (math.isfinite(v_wanted_m_s) and v_wanted_m_s > 0.0):
+        raise ValueError(f"wanted speed must be finite and > 0, got {v_wanted_m_s!r}")
+    own, tgt, g = inputs.own, inputs.target, params.guidance
+    x, y = own.east_m - tgt.east_m, own.north_m - tgt.north_m
+    r = math.hypot(x, y)
+    if r == 0.0:
+        return _effective_radius(v_wanted_m_s, params, lower, upper)
+    radial = (tgt.v_east_m_s * x + tgt.v_north_m_s * y) / r
+    along = g.orbit_sign * (tgt.v_north_m_s * x - tgt.v_east_m_s * y) / r  # v_t . t_hat
+    s = params.envelope.cruise_speed_m_s
+    u = -along + math.sqrt(max(s * s - radial * radial, 0.0))
+    if u <= 0.0:  # the target outruns the orbit here: the widest orbit slows the phase least
+        return upper
+    return min(max(u * g.radius_m / v_wanted_m_s, lower), upper)
+
+
 def _field_radius(radius_m: float, rd: float, step_m: float, lower: float, upper: float) -> float:
     """``radius_m`` rounded to the grid r_d + j step, kept within [lower, upper]."""
     r = rd + round((radius_m - rd) / step_m) * step_m
@@ -527,10 +566,16 @@ def _radius_actuator(
     prev_field = _field_radius(prev, rd, step, lower, upper)
     s = _guidance_c(state, params, speed_now, prev_field)
     v_wanted = _speed_command(inputs, params, s, prev_field)
-    wanted = _effective_radius(v_wanted, params, lower, upper)
+    tgt = inputs.target
+    rate = ph.radius_rate_m_s
+    if ph.radius_phase == "polar" and (tgt.v_east_m_s != 0.0 or tgt.v_north_m_s != 0.0):
+        wanted = _polar_radius(inputs, params, v_wanted, lower, upper)
+        rate += math.hypot(tgt.v_east_m_s, tgt.v_north_m_s)
+    else:
+        wanted = _effective_radius(v_wanted, params, lower, upper)
     # the first tick (radius_t_s = -inf) starts from r_d; time going back holds the radius
     dt = inputs.t_s - state.radius_t_s
-    max_change = ph.radius_rate_m_s * dt if 0.0 < dt < math.inf else 0.0
+    max_change = rate * dt if 0.0 < dt < math.inf else 0.0
     filtered = prev + min(max(wanted - prev, -max_change), max_change)
     # the band moves with speed: a radius the vehicle can no longer turn is left at once
     filtered = min(max(filtered, lower), upper)

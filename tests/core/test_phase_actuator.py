@@ -279,3 +279,42 @@ def test_around_a_moving_target_a_team_spaced_in_orbit_time_holds_r_d():
         if i > 0:
             # spaced evenly in angle instead, the two not at the reference move off r_d
             assert abs(even_cmd.radius_m - RD) >= 2.0
+
+
+POLAR = replace(RADIUS, radius_phase="polar")
+
+
+@pytest.mark.parametrize(("deg", "inside"), [(0.0, True), (180.0, False)])
+def test_polar_spacing_flies_inside_where_the_target_moves_with_the_orbit(deg, inside):
+    """A team spaced evenly in angle around a target driving north at 1.5 m/s (ccw orbit): at
+    0 deg (east of it) the orbit runs north with the target, the relative speed along it is
+    s - 1.5, so the polar rate needs a tighter orbit, r_d (s - 1.5) / s = 80.4 m; at 180 deg it
+    runs against it: r_d (s + 1.5) / s = 99.6 m. The orbit-time phase holds r_d there."""
+    target = TargetInfo(0.0, 0.0, 0.0, 1.5)
+    team = _team(deg, deg + 120.0, deg + 240.0)
+    polar = timed = AgentState()
+    for tick in range(300):  # 30 s: the slew (1 m/s + |v_t|) has long arrived
+        t = 0.1 * tick
+        polar, cmd, _ = _step(polar, _on_circle(deg), team, _params(0, POLAR), t, target)
+        timed, timed_cmd, _ = _step(timed, _on_circle(deg), team, _params(0), t, target)
+    expected = RD * (14.0 - 1.5) / 14.0 if inside else RD * (14.0 + 1.5) / 14.0
+    lower, upper = radius_bounds(_params(0, POLAR), 14.0)
+    assert cmd.radius_m == pytest.approx(min(max(expected, lower), upper), abs=0.5)
+    assert (cmd.radius_m < RD) is inside
+    assert timed_cmd.radius_m != pytest.approx(cmd.radius_m, abs=2.0)
+
+
+def test_polar_spacing_around_a_parked_target_is_the_radius_law_itself():
+    target = TargetInfo(0.0, 0.0)
+    team = _team(0.0, 100.0, 250.0)
+    a = b = AgentState()
+    for tick in range(50):
+        t = 0.1 * tick
+        a, cmd_a, _ = _step(a, _on_circle(0.0), team, _params(0, POLAR), t, target)
+        b, cmd_b, _ = _step(b, _on_circle(0.0), team, _params(0), t, target)
+        assert cmd_a == cmd_b
+
+
+def test_an_unknown_radius_phase_is_refused():
+    with pytest.raises(ValueError, match="radius_phase"):
+        replace(RADIUS, radius_phase="sideways")
