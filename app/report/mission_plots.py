@@ -150,7 +150,8 @@ def plot_mission(
             ax.grid(alpha=0.3)
         for ax in list(axes.flat)[len(parts) :]:
             ax.axis("off")
-        axes.flat[0].legend(loc="best", fontsize=8)
+        if axes.flat[0].get_legend_handles_labels()[0]:  # a lone vehicle has no spacing
+            axes.flat[0].legend(loc="best", fontsize=8)
         fig.suptitle(_heading(title, what))
         fig.tight_layout()
         path = out_dir / f"{name}.png"

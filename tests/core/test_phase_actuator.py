@@ -317,4 +317,4 @@ def test_polar_spacing_around_a_parked_target_is_the_radius_law_itself():
 
 def test_an_unknown_radius_phase_is_refused():
     with pytest.raises(ValueError, match="radius_phase"):
-        replace(RADIUS, radius_phase="sideways")
+        replace(RADIUS, radius_phase="sideways")  # type: ignore[arg-type]
