@@ -80,6 +80,12 @@ log = logging.getLogger(__name__)
 MIN_LATERAL_ACCEL_M_S2: Final = 0.05
 #: TECS_CLMB_MAX and TECS_SINK_MIN/MAX defaults are about 5 m/s: the airframe's climb limit
 MAX_CLIMB_RATE_M_S: Final = 5.0
+#: GUIDED_CHANGE_ALTITUDE's param3 0 is taken as this vertical rate (m/s; "pick a large value")
+UNLIMITED_ALT_RATE_M_S: Final = 1000.0
+#: ModeGuided::update_target_altitude runs at 10 Hz (the adjust_altitude_target task)
+ALT_TARGET_PERIOD_S: Final = 0.1
+#: TECS_TIME_CONST default (s): TECS closes a height error with about this time constant
+TECS_TIME_CONSTANT_S: Final = 5.0
 #: TKOFF_DIST default: TAKEOFF mode loiters this far ahead of the launch point (m)
 TAKEOFF_LOITER_DISTANCE_M: Final = 200.0
 #: GCS heartbeats come at a wall-clock rate (MAVSDK: 1 Hz), so the failsafe also waits this
@@ -356,7 +362,8 @@ class ArduPlaneAutopilot:
         self._guided_speed_m_s: float | None = None
         self._guided_accel_m_s2 = math.inf
         self._guided_altitude_m: float | None = None
-        self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S
+        #: the vertical rate of the last GUIDED_CHANGE_ALTITUDE (m/s); None: no slew commanded
+        self._guided_alt_rate_m_s: float | None = None
 
     # ---- state -------------------------------------------------------------------------------
 
@@ -647,10 +654,25 @@ class ArduPlaneAutopilot:
         else:
             return denied
         rate = abs(rate) if math.isfinite(rate) else 0.0
-        self._guided_climb_rate_m_s = MAX_CLIMB_RATE_M_S if rate == 0.0 else rate
-        v.altitude_target_m = self._guided_altitude_m
-        v.climb_rate_m_s = min(self._guided_climb_rate_m_s, MAX_CLIMB_RATE_M_S)
+        self._guided_alt_rate_m_s = UNLIMITED_ALT_RATE_M_S if rate == 0.0 else rate
+        self._slew_altitude(v)
         return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _slew_altitude(self, v: SimVehicle) -> None:
+        """ModeGuided::update_target_altitude (4.6): the height TECS is given is the *current*
+        altitude moved toward the commanded one by rate x 0.1 s (the task's period), so with a
+        rate of a few m/s TECS sees a few decimetres of error and hardly climbs (real 4.6.2 SITL:
+        NAV_CONTROLLER_OUTPUT alt_error 0.3 m at rate 3 m/s, 0.05 m/s of climb, 70 m short of
+        the command for a whole mission); param3 0 (1000 m/s) gives TECS the command itself.
+        TECS closes the error it is given with its time constant, at most at its climb limit."""
+        target, rate = self._guided_altitude_m, self._guided_alt_rate_m_s
+        if target is None or rate is None:
+            return
+        step = rate * ALT_TARGET_PERIOD_S
+        now = v.air_altitude_m
+        interim = max(now - step, min(now + step, target))
+        v.altitude_target_m = interim
+        v.climb_rate_m_s = min(MAX_CLIMB_RATE_M_S, abs(interim - now) / TECS_TIME_CONSTANT_S)
 
     def _reposition_guided(
         self, v: SimVehicle, p: tuple[float, ...], t_s: float
@@ -709,6 +731,7 @@ class ArduPlaneAutopilot:
         command = v.command or v.hold_here()
         if v.mode == GUIDED:
             command = self._guided_command(v, command)
+            self._slew_altitude(v)
         course, speed = guide(v.state, command, limits.course_gain_per_s)
         speed_now = max(v.state.speed_m_s, limits.min_speed_m_s)
         if isinstance(command, CourseCommand) and self._heading_pid:

@@ -3,6 +3,7 @@ checked against recorders of MAVSDK's Offboard / MavlinkDirect / Param plugins."
 
 import json
 import math
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -630,7 +631,8 @@ async def test_arduplane_switches_to_guided_then_sends_heading_speed_altitude():
     assert altitude[3]["command"] == 43001
     assert altitude[3]["frame"] == 3  # MAV_FRAME_GLOBAL_RELATIVE_ALT
     assert altitude[3]["z"] == 120.0
-    assert altitude[3]["param3"] == 3.0
+    # 0: TECS's own climb rate (4.6's slew at 3 m/s left TECS 0.3 m of error: no climb)
+    assert altitude[3]["param3"] == 0.0
 
 
 async def test_arduplane_sends_only_what_changed():
@@ -678,6 +680,27 @@ async def test_arduplane_heading_limits_the_turn_to_the_envelopes_rate(limit_cou
     # the coordinated turn at that bank is the envelope's rate: g tan(bank) / v = W
     bank = math.atan(second["param3"] / 9.80665)
     assert 9.80665 * math.tan(bank) / 12.0 == pytest.approx(0.2)
+
+
+async def test_arduplane_sizes_the_turn_limit_on_the_speed_flown_when_it_is_faster():
+    # still 18 m/s while slowing to a commanded 10: sized on 10 m/s the bank limit would hold
+    # the turn to 0.2 * 10 / 18 = 0.11 rad/s; sized on 18 it is the envelope's 0.2 rad/s
+    commands = CommandRecorder()
+    adapter = arduplane(commands, limits=LIMITS)
+    fast = VehicleState(t_s=12.0, course_rad=0.0, relative_altitude_m=100.0, flying_speed_m_s=18.0)
+    await adapter.send(CourseSpeedCommand(0.0, 10.0), 100.0, fast)
+    # the same course, the aircraft now at 16 m/s: the limit moved by 11 %, sent again
+    slower = replace(fast, flying_speed_m_s=16.0)
+    await adapter.send(CourseSpeedCommand(0.0, 10.0), 100.0, slower)
+    # 15.5 m/s: 3 % from the last sent, not sent
+    await adapter.send(CourseSpeedCommand(0.0, 10.0), 100.0, replace(fast, flying_speed_m_s=15.5))
+    # slower than commanded, or unknown, or not finite: the commanded speed
+    for flying in (8.0, None, math.nan):
+        await adapter.send(
+            CourseSpeedCommand(0.0, 10.0), 100.0, replace(fast, flying_speed_m_s=flying)
+        )
+    sent = [f["param3"] for *_, f in commands.sent if f["command"] == 43002]
+    assert sent == [pytest.approx(3.6), pytest.approx(3.2), pytest.approx(2.0)]
 
 
 async def test_arduplane_takes_off_in_takeoff_mode():

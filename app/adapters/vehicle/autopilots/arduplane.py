@@ -99,10 +99,19 @@ class ArduPlaneAdapter:
 
     Each goes out when it changes by more than its deadband; ArduPlane keeps the last one until
     the mode changes. The speed is flown as commanded (GUIDED_CHANGE_SPEED, ``honours_speed``).
-    The heading command's param3 is the lateral acceleration the envelope allows at the
-    commanded speed, a = v * max course rate (m/s^2): ArduPlane banks at most atan(a / g)
-    (mode_guided.cpp ``ModeGuided::update``), and a coordinated turn at that bank turns at
-    g tan(bank) / v = the envelope's course rate, the rate the guidance was built for.
+    The heading command's param3 is the lateral acceleration the envelope allows at the speed
+    flown, a = v * max course rate (m/s^2), v the larger of the commanded speed and the speed
+    the airframe flies now: ArduPlane banks at most atan(a / g) (mode_guided.cpp
+    ``ModeGuided::update``), and a coordinated turn at that bank turns at g tan(bank) / v =
+    the envelope's course rate, the rate the guidance was built for. (Sized on the commanded
+    speed alone, a vehicle still slowing down from 18 to a commanded 10 m/s was held to
+    0.14 rad/s in real 4.6.2 SITL, and the course loop's gain was identified low.) The heading
+    command is sent again when that limit changes by more than ``accel_deadband`` (10 %).
+    The altitude command's param3 is 0: ArduPlane 4.6's GUIDED altitude slew
+    (``ModeGuided::update_target_altitude``) gives TECS the *current* altitude moved toward
+    the command by param3 x 0.1 s every 0.1 s, so at 3 m/s TECS saw 0.3 m of error and the
+    aircraft climbed 0.05 m/s (real SITL: 25-43 m all mission for a 100 m command). With 0
+    ("maximum rate", 1000 m/s) TECS gets the command and climbs at its own TECS_CLMB_MAX.
     Take-off is TAKEOFF mode: ArduPlane refuses MAV_CMD_NAV_TAKEOFF (which MAVSDK's
     ``Action.takeoff`` sends) unless it is a QuadPlane.
 
@@ -157,6 +166,7 @@ class ArduPlaneAdapter:
     course_deadband_rad: float = math.radians(0.5)
     speed_deadband_m_s: float = 0.1
     altitude_deadband_m: float = 0.5
+    accel_deadband: float = 0.1
     telemetry_rates_hz: Mapping[str, float] | None = field(
         default_factory=arduplane_telemetry_rates
     )
@@ -164,6 +174,7 @@ class ArduPlaneAdapter:
     sleep: Sleep = asyncio.sleep
     name: AutopilotName = "arduplane"
     _course_sent: float | None = field(default=None, init=False)
+    _accel_sent: float | None = field(default=None, init=False)
     _speed_sent: float | None = field(default=None, init=False)
     _altitude_sent: float | None = field(default=None, init=False)
     _journal: ParamJournal = field(init=False)
@@ -347,12 +358,21 @@ class ArduPlaneAdapter:
             (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode),
         )
 
-    def heading_command(self, course_rad: float, speed_m_s: float) -> MavlinkMessage:
-        """GUIDED_CHANGE_HEADING: param1 course over ground, param2 the course (deg, [0, 360)),
-        param3 the lateral acceleration limit v * max course rate (m/s^2; the envelope's rate
-        whether or not the setpoints' course change is limited)."""
+    def lateral_accel_limit(self, speed_m_s: float, flying_speed_m_s: float | None) -> float:
+        """v * max course rate (m/s^2), v the larger of the commanded speed and the speed
+        flown (when known and finite), at least ArduPlane's floor of 0.05."""
+        speed = speed_m_s
+        if flying_speed_m_s is not None and math.isfinite(flying_speed_m_s):
+            speed = max(speed, flying_speed_m_s)
         rate = self.limits.envelope.max_course_rate_rad_s
-        max_lateral_accel = max(speed_m_s * rate, MIN_LATERAL_ACCEL_M_S2)
+        return max(speed * rate, MIN_LATERAL_ACCEL_M_S2)
+
+    def heading_command(
+        self, course_rad: float, speed_m_s: float, flying_speed_m_s: float | None = None
+    ) -> MavlinkMessage:
+        """GUIDED_CHANGE_HEADING: param1 course over ground, param2 the course (deg, [0, 360)),
+        param3 the lateral acceleration limit (``lateral_accel_limit``; the envelope's rate
+        whether or not the setpoints' course change is limited)."""
         return command_int(
             self.vehicle_id,
             self.target_component,
@@ -360,7 +380,7 @@ class ArduPlaneAdapter:
             (
                 mavlink.HEADING_TYPE_COURSE_OVER_GROUND,
                 course_deg_0_360(course_rad),
-                max_lateral_accel,
+                self.lateral_accel_limit(speed_m_s, flying_speed_m_s),
                 0.0,
             ),
         )
@@ -378,7 +398,7 @@ class ArduPlaneAdapter:
             self.vehicle_id,
             self.target_component,
             mavlink.MAV_CMD_GUIDED_CHANGE_ALTITUDE,
-            (0.0, 0.0, self.limits.max_climb_rate_m_s, 0.0),
+            (0.0, 0.0, 0.0, 0.0),  # param3 0: TECS's own climb rate (class docstring)
             frame=mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
             z=altitude_m,
         )
@@ -394,19 +414,27 @@ class ArduPlaneAdapter:
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
         await self._send(self.mode_command(ARDUPLANE_GUIDED), "mode change to GUIDED")
-        self._course_sent = self._speed_sent = self._altitude_sent = None
+        self._course_sent = self._accel_sent = self._speed_sent = self._altitude_sent = None
         await self.send(setpoint, altitude_m, state)
 
     async def send(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
-        course = self._course_sent
-        if course is None or abs(wrap_pi(setpoint.course_rad - course)) > self.course_deadband_rad:
+        course, accel_sent = self._course_sent, self._accel_sent
+        accel = self.lateral_accel_limit(setpoint.speed_m_s, state.flying_speed_m_s)
+        if (
+            course is None
+            or accel_sent is None
+            or abs(wrap_pi(setpoint.course_rad - course)) > self.course_deadband_rad
+            or abs(accel - accel_sent) > self.accel_deadband * accel_sent
+        ):
             await self._send(
-                self.heading_command(setpoint.course_rad, setpoint.speed_m_s),
+                self.heading_command(
+                    setpoint.course_rad, setpoint.speed_m_s, state.flying_speed_m_s
+                ),
                 "GUIDED_CHANGE_HEADING",
             )
-            self._course_sent = setpoint.course_rad
+            self._course_sent, self._accel_sent = setpoint.course_rad, accel
         speed = self._speed_sent
         if speed is None or abs(setpoint.speed_m_s - speed) > self.speed_deadband_m_s:
             await self._send(self.speed_command(setpoint.speed_m_s), "GUIDED_CHANGE_SPEED")

@@ -116,13 +116,16 @@ class VehicleState:
     """What an adapter needs of the vehicle's state to place a setpoint.
 
     ``local_ned_m`` is the vehicle's own local position (LOCAL_POSITION_NED), which only the
-    PX4 adapter needs; ``None`` when the vehicle sends none.
+    PX4 adapter needs; ``None`` when the vehicle sends none. ``flying_speed_m_s`` is the speed
+    the airframe flies now (the autopilot's airspeed where it reports one, else its ground
+    speed; ``None`` unknown), which the ArduPlane adapter sizes its turn limit on.
     """
 
     t_s: float
     course_rad: float
     relative_altitude_m: float
     local_ned_m: tuple[float, float, float] | None = None
+    flying_speed_m_s: float | None = None
 
 
 def check_finite(values: Mapping[str, float], what: str) -> None:

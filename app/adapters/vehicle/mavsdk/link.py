@@ -713,6 +713,9 @@ class MavsdkVehicleLink:
             course_rad=latest.course_rad,
             relative_altitude_m=latest.relative_altitude_m,
             local_ned_m=self._local_ned,
+            flying_speed_m_s=(
+                latest.airspeed_m_s if latest.airspeed_m_s is not None else latest.ground_speed_m_s
+            ),
         )
 
     async def start_offboard(self, first: CourseSpeedCommand) -> None:
