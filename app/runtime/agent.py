@@ -107,6 +107,9 @@ class AgentCounters:
     frame_wait_max_s: float = 0.0  # longest a steered frame waited for its tick (vehicle s)
     frame_wait_sum_s: float = 0.0  # summed over the ticks (mean: / ticks)
     messages_refused: int = 0  # bus messages not believed (stamped ahead, a fused estimate off)
+    #: of those, refused while the agent's own vehicle was silent (its clock had stopped, so
+    #: every teammate's message is "ahead"): counted, not logged one by one
+    refused_while_silent: int = 0
     message_errors: int = 0  # bus messages whose handling failed (logged, skipped)
     tick_errors: int = 0  # control ticks that failed (logged, skipped)
     commands_nonfinite: int = 0  # commands with a non-finite value: the tick sent nothing
@@ -629,6 +632,9 @@ class VehicleAgent:
                 pass
         if out is not None and out.refused:
             self.counters.messages_refused += 1
+            if not self._link.link_ok:
+                self.counters.refused_while_silent += 1
+                return
             self._fault(
                 "message_refused",
                 self._last_t,

@@ -196,6 +196,38 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
     assert agent.counters.tick_errors == agent.counters.message_errors == 0
 
 
+async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_without_logging(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The agent's clock is its vehicle's: once the vehicle is silent every teammate's status is
+    stamped ahead of it and refused. Counted apart, not logged one by one (a killed PX4 left
+    2,000 such warnings in the log); while the link is up the same refusal is logged."""
+    plan = build_plan(load_config("test-short", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    async with (
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id="agent-2") as teammate,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
+        async with asyncio.TaskGroup() as tg:
+            task = tg.create_task(agent.run())
+            await asyncio.sleep(0.01)
+            link.put(frame(1.0, 90.0, 0.0))
+            await until(lambda: agent.counters.ticks == 1)
+            await teammate.publish(topics.status(1), status(60.0, vehicle=1))
+            await until(lambda: agent.counters.messages_refused == 1)
+            assert "message_refused" in caplog.text
+            caplog.clear()
+            link.link_ok = False  # type: ignore[misc]
+            for k in range(5):
+                await teammate.publish(topics.status(1), status(61.0 + k, vehicle=1))
+            await until(lambda: agent.counters.messages_refused == 6)
+            task.cancel()
+    assert agent.counters.refused_while_silent == 5
+    assert "message_refused" not in caplog.text
+
+
 async def test_every_fused_estimate_is_refused_or_counted_unread() -> None:
     """A burst of forged fused estimates: the agent reads only the newest (a one-deep queue), so
     each one is either refused when read or counted as pushed out unread, none lost."""
