@@ -219,7 +219,7 @@ async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_with
             await until(lambda: agent.counters.messages_refused == 1)
             assert "message_refused" in caplog.text
             caplog.clear()
-            link.link_ok = False  # type: ignore[misc]
+            link.link_ok = False
             for k in range(5):
                 await teammate.publish(topics.status(1), status(61.0 + k, vehicle=1))
             await until(lambda: agent.counters.messages_refused == 6)
