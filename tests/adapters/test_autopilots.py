@@ -505,6 +505,7 @@ STOCK_ARDUPLANE: dict[str, int | float] = {
     "FS_LONG_ACTN": 0,
     "AIRSPEED_MIN": 9,
     "AIRSPEED_MAX": 22,
+    "GUIDED_P": 5000.0,  # AC_PID, a float
 }
 
 
@@ -701,6 +702,57 @@ async def test_arduplane_sizes_the_turn_limit_on_the_speed_flown_when_it_is_fast
         )
     sent = [f["param3"] for *_, f in commands.sent if f["command"] == 43002]
     assert sent == [pytest.approx(3.6), pytest.approx(3.2), pytest.approx(2.0)]
+
+
+async def test_arduplane_linearises_the_heading_command_to_the_assumed_course_loop():
+    """GUIDED banks GUIDED_P x error and turns at g tan(bank) / V; the course sent makes that
+    k e (k = 1 /s, the envelope's) at the speed flown, so the loop's gain no longer halves
+    from 10 to 20 m/s."""
+    commands = CommandRecorder()
+    adapter = arduplane(commands, limits=LIMITS)
+    await adapter.prepare()
+    p = math.radians(5000.0 / 100.0)  # rad of bank per rad of error
+    for speed in (10.0, 14.0, 20.0):
+        state = replace(STATE, course_rad=0.3, flying_speed_m_s=speed)
+        error = 0.1  # wanted: a turn of k e = 0.1 rad/s
+        sent = adapter.linearised_course(0.3 + error, state, 14.0)
+        bank = p * (sent - 0.3)
+        assert 9.80665 * math.tan(bank) / speed == pytest.approx(1.0 * error, rel=1e-9)
+    # 14 m/s: 1.6 times the error asked; the course goes out as that, in degrees
+    fourteen = replace(STATE, course_rad=0.0, flying_speed_m_s=14.0)
+    await adapter.send(CourseSpeedCommand(0.1, 14.0), 100.0, fourteen)
+    (heading,) = [f for *_, f in commands.sent if f["command"] == 43002]
+    assert math.radians(heading["param2"]) == pytest.approx(
+        math.atan(0.1 * 14.0 / 9.80665) / p, rel=1e-6
+    )
+    # across the wrap: a wanted left turn from 359 deg stays a left turn
+    north = replace(STATE, course_rad=math.radians(359.0), flying_speed_m_s=14.0)
+    left = adapter.linearised_course(math.radians(357.0), north, 14.0)
+    assert -0.1 < wrap_pi(left - math.radians(359.0)) < math.radians(-2.0)
+
+
+async def test_arduplane_re_sends_the_linearised_course_as_the_vehicle_turns_onto_it():
+    # one wanted course, east; the vehicle turns from north onto it: the course sent moves
+    # with it (ArduPlane holds the last one sent) and ends at the wanted course itself
+    commands = CommandRecorder()
+    adapter = arduplane(commands, limits=LIMITS)
+    await adapter.prepare()
+    for course in (0.0, 0.5, 1.0, 1.4, math.pi / 2):
+        state = replace(STATE, course_rad=course, flying_speed_m_s=14.0)
+        await adapter.send(CourseSpeedCommand(math.pi / 2, 14.0), 100.0, state)
+    sent = [math.radians(f["param2"]) for *_, f in commands.sent if f["command"] == 43002]
+    assert len(sent) == 5
+    assert sent[-1] == pytest.approx(math.pi / 2)
+
+
+async def test_arduplane_without_guided_p_sends_the_course_as_wanted(caplog):
+    params = ParamRecorder({k: v for k, v in STOCK_ARDUPLANE.items() if k != "GUIDED_P"})
+    adapter = arduplane(params=params)
+    with caplog.at_level("WARNING"):
+        await adapter.prepare()
+    assert "GUIDED_P unreadable: heading commands sent as the course wanted" in caplog.text
+    state = replace(STATE, flying_speed_m_s=14.0)
+    assert adapter.linearised_course(0.1, state, 14.0) == 0.1
 
 
 async def test_arduplane_takes_off_in_takeoff_mode():

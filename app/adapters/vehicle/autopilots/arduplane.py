@@ -28,6 +28,7 @@ from app.adapters.vehicle.autopilots.base import (
     command_int,
     command_long,
     course_deg_0_360,
+    read_param_number,
     request_message_rates,
     send_checked_command,
 )
@@ -47,6 +48,12 @@ ARDUPLANE_LOITER: Final = mavlink.PLANE_MODE_LOITER
 ARDUPLANE_TAKEOFF: Final = mavlink.PLANE_MODE_TAKEOFF
 #: the least GUIDED_CHANGE_HEADING param3 ArduPlane takes (m/s^2; ``MAX(param3, 0.05f)``)
 MIN_LATERAL_ACCEL_M_S2: Final = 0.05
+#: GUIDED's heading loop gain: bank (centidegrees) per radian of course-over-ground error
+GUIDED_P: Final = "GUIDED_P"
+#: standard gravity (m/s^2), as ArduPilot's GRAVITY_MSS
+GRAVITY_M_S2: Final = 9.80665
+#: the most course error a linearised heading command asks of ArduPlane (rad)
+MAX_LINEARISED_ERROR_RAD: Final = math.radians(80.0)
 #: the rate asked for each message the link steers or reports on (Hz), unless told otherwise:
 #: ArduPlane streams them at 1 Hz (or its SRn_ rates) to a GCS that does not ask
 DEFAULT_TELEMETRY_RATE_HZ: Final = 10.0
@@ -107,6 +114,8 @@ class ArduPlaneAdapter:
     speed alone, a vehicle still slowing down from 18 to a commanded 10 m/s was held to
     0.14 rad/s in real 4.6.2 SITL, and the course loop's gain was identified low.) The heading
     command is sent again when that limit changes by more than ``accel_deadband`` (10 %).
+    With ``linearise_heading`` (and GUIDED_P read in ``prepare``) the course sent is the one
+    that makes GUIDED's P loop turn at the rate the guidance assumes (``linearised_course``).
     The altitude command's param3 is 0: ArduPlane 4.6's GUIDED altitude slew
     (``ModeGuided::update_target_altitude``) gives TECS the *current* altitude moved toward
     the command by param3 x 0.1 s every 0.1 s, so at 3 m/s TECS saw 0.3 m of error and the
@@ -167,6 +176,7 @@ class ArduPlaneAdapter:
     speed_deadband_m_s: float = 0.1
     altitude_deadband_m: float = 0.5
     accel_deadband: float = 0.1
+    linearise_heading: bool = True
     telemetry_rates_hz: Mapping[str, float] | None = field(
         default_factory=arduplane_telemetry_rates
     )
@@ -175,6 +185,8 @@ class ArduPlaneAdapter:
     name: AutopilotName = "arduplane"
     _course_sent: float | None = field(default=None, init=False)
     _accel_sent: float | None = field(default=None, init=False)
+    #: GUIDED_P as read in ``prepare`` (centidegrees of bank per radian); None: not linearised
+    _guided_p: float | None = field(default=None, init=False)
     _speed_sent: float | None = field(default=None, init=False)
     _altitude_sent: float | None = field(default=None, init=False)
     _journal: ParamJournal = field(init=False)
@@ -199,6 +211,8 @@ class ArduPlaneAdapter:
         return "GUIDED"
 
     async def prepare(self) -> None:
+        if self.linearise_heading:
+            await self._read_guided_p()
         if self.check_airspeed_range:
             await check_speed_range(
                 self.params,
@@ -245,6 +259,51 @@ class ArduPlaneAdapter:
             "so that losing this ground station's heartbeats raises the GCS failsafe in GUIDED",
             before_write=self._wait_for_our_heartbeat,
         )
+
+    async def _read_guided_p(self) -> None:
+        found = await read_param_number(self.params, GUIDED_P)
+        p = None if found is None else found[1]
+        if p is None or not (math.isfinite(p) and p > 0.0):
+            log.warning(
+                "vehicle %d: %s %s: heading commands sent as the course wanted (not linearised;"
+                " the course loop's gain then varies as 1 / airspeed)",
+                self.vehicle_id,
+                GUIDED_P,
+                "unreadable" if p is None else f"= {p!r}",
+            )
+            self._guided_p = None
+            return
+        self._guided_p = p
+        log.info(
+            "vehicle %d: %s = %g: heading commands linearised to the course loop's k = %.2f /s",
+            self.vehicle_id,
+            GUIDED_P,
+            p,
+            self.limits.envelope.course_gain_per_s,
+        )
+
+    def linearised_course(self, course_rad: float, state: VehicleState, speed_m_s: float) -> float:
+        """The course to send so that ArduPlane turns as the loop guidance assumes.
+
+        GUIDED banks P x (course error) (``ModeGuided::update``; P = GUIDED_P centidegrees per
+        radian, stock 5000: 0.87 rad of bank per radian) and a coordinated turn at that bank
+        turns at g tan(bank) / V: a course-loop gain g P' / V that halves from 10 to 20 m/s.
+        Guidance assumes rate = k e with k the envelope's ``course_gain_per_s``. So for the
+        wanted error e = wrap(command - course) this sends the error e' with
+        P' e' = atan(k e V / g): ArduPlane then turns at k e at any airspeed V (the speed flown,
+        else the commanded one). Unchanged when GUIDED_P was not read."""
+        p = self._guided_p
+        if p is None:
+            return course_rad
+        bank_per_rad = math.radians(p / 100.0)
+        speed = speed_m_s
+        if state.flying_speed_m_s is not None and math.isfinite(state.flying_speed_m_s):
+            speed = max(state.flying_speed_m_s, 1.0)
+        error = wrap_pi(course_rad - state.course_rad)
+        k = self.limits.envelope.course_gain_per_s
+        wanted = math.atan(k * error * speed / GRAVITY_M_S2) / bank_per_rad
+        wanted = max(-MAX_LINEARISED_ERROR_RAD, min(MAX_LINEARISED_ERROR_RAD, wanted))
+        return wrap_pi(state.course_rad + wanted)
 
     async def _wait_for_our_heartbeat(self) -> None:
         """Let ArduPlane count a heartbeat from the GCS id before its failsafe is enabled."""
@@ -420,21 +479,23 @@ class ArduPlaneAdapter:
     async def send(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
     ) -> None:
+        # the course that goes out (linearised, it moves as the vehicle turns even for a
+        # constant wanted course, and comes to it as the error closes) is what the deadband
+        # compares with the last one sent
         course, accel_sent = self._course_sent, self._accel_sent
+        sent = self.linearised_course(setpoint.course_rad, state, setpoint.speed_m_s)
         accel = self.lateral_accel_limit(setpoint.speed_m_s, state.flying_speed_m_s)
         if (
             course is None
             or accel_sent is None
-            or abs(wrap_pi(setpoint.course_rad - course)) > self.course_deadband_rad
+            or abs(wrap_pi(sent - course)) > self.course_deadband_rad
             or abs(accel - accel_sent) > self.accel_deadband * accel_sent
         ):
             await self._send(
-                self.heading_command(
-                    setpoint.course_rad, setpoint.speed_m_s, state.flying_speed_m_s
-                ),
+                self.heading_command(sent, setpoint.speed_m_s, state.flying_speed_m_s),
                 "GUIDED_CHANGE_HEADING",
             )
-            self._course_sent, self._accel_sent = setpoint.course_rad, accel
+            self._course_sent, self._accel_sent = sent, accel
         speed = self._speed_sent
         if speed is None or abs(setpoint.speed_m_s - speed) > self.speed_deadband_m_s:
             await self._send(self.speed_command(setpoint.speed_m_s), "GUIDED_CHANGE_SPEED")
