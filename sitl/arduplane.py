@@ -28,6 +28,11 @@ whose default is the real behaviour):
   error, limited to atan(param3 / g) (param3 the lateral acceleration limit, at least 0.05 m/s^2)
   and to ROLL_LIMIT_DEG (45; LIM_ROLL_CD before 4.5); the turn is the coordinated one,
   course rate = g tan(bank) / V. At 14 m/s the small-error gain is about 0.6 /s, not 1 /s.
+- The turn at a bank (``arduplane_turn_efficiency``, 0.70): real ArduPlane 4.6.2 SITL (its plane
+  model, stock plane.parm, GUIDED) turned at 0.70 of g tan(bank) / V (median over three
+  aircraft, 0.65-0.73 in every 3 m/s airspeed band from 9 to 22 m/s, against ATTITUDE's roll and
+  VFR_HUD's airspeed), so every mode's turn here is eta g tan(bank) / V and ATTITUDE reports
+  the bank that turn takes, atan(V rate / (eta g)).
   The bank reaches the demanded one through the roll controller, whose angle loop is first
   order with RLL2SRV_TCONST (0.5 s; libraries/APM_Control/AP_RollController.cpp: desired
   roll rate = angle error / tau), so the loop lags the course command by about half a second.
@@ -319,6 +324,7 @@ class ArduPlaneAutopilot:
         self._origin_alt_m = sim.origin_alt_m
         self._streams = arduplane_streams(sim.arduplane_stream_rate_hz)
         self._heading_pid = sim.arduplane_guided_heading == "pid"
+        self._turn_efficiency = sim.arduplane_turn_efficiency
         #: the bank the airframe flies (rad, > 0 right), lagging GUIDED's demand
         self._bank_rad = 0.0
         self._rebase = sim.arduplane_guided_rebase
@@ -375,6 +381,10 @@ class ArduPlaneAutopilot:
     def trim_throttle(self) -> float:
         """TRIM_THROTTLE: the cruise throttle (ArduPlane default 45 %)."""
         return 0.45
+
+    @property
+    def turn_efficiency(self) -> float:
+        return self._turn_efficiency
 
     @property
     def stream_defaults(self) -> StreamTable:
@@ -737,7 +747,7 @@ class ArduPlaneAutopilot:
         if isinstance(command, CourseCommand) and self._heading_pid:
             demand = self.guided_bank_rad(v, command)
             self._bank_rad += (demand - self._bank_rad) * -math.expm1(-dt_s / ROLL_TIME_CONSTANT_S)
-            rate = GRAVITY_M_S2 * math.tan(self._bank_rad) / speed_now
+            rate = self._turn_efficiency * GRAVITY_M_S2 * math.tan(self._bank_rad) / speed_now
             rate = max(-limits.max_course_rate_rad_s, min(limits.max_course_rate_rad_s, rate))
             course = v.state.course_rad + rate / limits.course_gain_per_s
         elif isinstance(command, CourseCommand):
@@ -753,7 +763,9 @@ class ArduPlaneAutopilot:
         v.step(course, speed, limits, dt_s)
         if not (isinstance(command, CourseCommand) and self._heading_pid):
             # the bank of the turn the other modes fly, where a GUIDED heading loop takes over
-            self._bank_rad = math.atan(v.state.course_rate_rad_s * speed_now / GRAVITY_M_S2)
+            self._bank_rad = math.atan(
+                v.state.course_rate_rad_s * speed_now / (self._turn_efficiency * GRAVITY_M_S2)
+            )
 
     def guided_bank_rad(self, v: SimVehicle, command: CourseCommand) -> float:
         """ModeGuided::update: bank = GUIDED_P * (course over ground error), limited to
@@ -770,10 +782,11 @@ class ArduPlaneAutopilot:
         return max(-limit, min(limit, bank))
 
     def guided_course_rate_rad_s(self, v: SimVehicle, command: CourseCommand) -> float:
-        """The coordinated turn at the GUIDED bank demanded: g tan(bank) / V (the airframe gets
-        there through the roll controller's lag, ``ROLL_TIME_CONSTANT_S``)."""
+        """The turn at the GUIDED bank demanded: eta g tan(bank) / V (the airframe gets there
+        through the roll controller's lag, ``ROLL_TIME_CONSTANT_S``)."""
         speed = max(v.state.speed_m_s, v.config.limits.min_speed_m_s)
-        return GRAVITY_M_S2 * math.tan(self.guided_bank_rad(v, command)) / speed
+        bank = self.guided_bank_rad(v, command)
+        return self._turn_efficiency * GRAVITY_M_S2 * math.tan(bank) / speed
 
     def _guided_command(self, v: SimVehicle, command: Command) -> Command:
         """GUIDED: the commanded course, else the loiter it entered with, at the guided speed."""

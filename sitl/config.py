@@ -224,6 +224,8 @@ class SimConfig:
     source): ``takeoff``; ``px4_offboard_speed``, ``px4_trim_airspeed_m_s`` (FW_AIRSPD_TRIM;
     None: each vehicle's cruise speed) and ``px4_curvature_sign``; ``arduplane_stream_rate_hz``
     (the SRn_* stream rates, 1 Hz as shipped), ``arduplane_guided_heading``,
+    ``arduplane_turn_efficiency`` (the course rate flown at a bank, as a fraction of the
+    coordinated turn's g tan(bank) / V: 0.70 in real ArduPlane 4.6.2 SITL),
     ``arduplane_gcs_seen_at_boot`` (ArduPlane counts its own boot as the GCS's last heartbeat)
     and ``arduplane_guided_rebase`` (GUIDED entered holds the altitude it was entered at).
     Each default is what the real autopilot does.
@@ -261,6 +263,7 @@ class SimConfig:
     px4_curvature_sign: Px4CurvatureSign = "v1.16.0"
     arduplane_stream_rate_hz: float = 1.0
     arduplane_guided_heading: GuidedHeadingLoop = "pid"
+    arduplane_turn_efficiency: float = 0.70
     arduplane_gcs_seen_at_boot: bool = True
     arduplane_guided_rebase: bool = True
 
@@ -320,6 +323,9 @@ class SimConfig:
         if self.px4_trim_airspeed_m_s is not None:
             _positive("px4_trim_airspeed_m_s", self.px4_trim_airspeed_m_s)
         _non_negative("arduplane_stream_rate_hz", self.arduplane_stream_rate_hz)
+        eta = self.arduplane_turn_efficiency
+        if not (math.isfinite(eta) and 0.0 < eta <= 1.0):
+            raise ValueError(f"arduplane_turn_efficiency must be in (0, 1], got {eta!r}")
         if self.gcs_sysid_param not in ("SYSID_MYGCS", "MAV_GCS_SYSID"):
             raise ValueError(
                 "gcs_sysid_param must be 'SYSID_MYGCS' or 'MAV_GCS_SYSID', got "

@@ -155,6 +155,11 @@ class Px4Autopilot:
         return 0.6
 
     @property
+    def turn_efficiency(self) -> float:
+        """The coordinated turn: PX4 SIH's turns were not measured against it."""
+        return 1.0
+
+    @property
     def stream_defaults(self) -> StreamTable:
         return PX4_STREAMS
 

@@ -46,9 +46,10 @@ def boot_ms(t_s: float) -> int:
     return round(t_s * 1000.0) & 0xFFFFFFFF
 
 
-def roll_rad(state: FixedWingState) -> float:
-    """The bank of a coordinated turn at the state's speed and course rate (right turn > 0)."""
-    return math.atan(state.speed_m_s * state.course_rate_rad_s / GRAVITY_M_S2)
+def roll_rad(state: FixedWingState, turn_efficiency: float = 1.0) -> float:
+    """The bank of a turn at the state's speed and course rate (right turn > 0), for an
+    airframe that turns at ``turn_efficiency`` of the coordinated rate g tan(bank) / V."""
+    return math.atan(state.speed_m_s * state.course_rate_rad_s / (turn_efficiency * GRAVITY_M_S2))
 
 
 def heading_rad(state: FixedWingState) -> float:
@@ -126,16 +127,21 @@ def battery_status(battery_fraction: float) -> mavlink.MAVLink_message:
     )  # fmt: skip
 
 
-def attitude(state: FixedWingState, t_s: float) -> mavlink.MAVLink_message:
+def attitude(
+    state: FixedWingState, t_s: float, turn_efficiency: float = 1.0
+) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_attitude_message(
-        boot_ms(t_s), roll_rad(state), 0.0, wrap_pi(state.course_rad), 0.0, 0.0,
+        boot_ms(t_s), roll_rad(state, turn_efficiency), 0.0, wrap_pi(state.course_rad), 0.0, 0.0,
         state.course_rate_rad_s,
     )  # fmt: skip
 
 
-def attitude_quaternion(state: FixedWingState, t_s: float) -> mavlink.MAVLink_message:
+def attitude_quaternion(
+    state: FixedWingState, t_s: float, turn_efficiency: float = 1.0
+) -> mavlink.MAVLink_message:
     """Yaw then roll (pitch 0): q = q_yaw * q_roll, scalar first."""
-    half_roll, half_yaw = 0.5 * roll_rad(state), 0.5 * heading_rad(state)
+    half_roll = 0.5 * roll_rad(state, turn_efficiency)
+    half_yaw = 0.5 * heading_rad(state)
     cr, sr = math.cos(half_roll), math.sin(half_roll)
     cy, sy = math.cos(half_yaw), math.sin(half_yaw)
     return mavlink.MAVLink_attitude_quaternion_message(

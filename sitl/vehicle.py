@@ -141,6 +141,12 @@ class Autopilot(Protocol):
         ...
 
     @property
+    def turn_efficiency(self) -> float:
+        """The course rate the airframe turns at a bank, as a fraction of the coordinated
+        turn's g tan(bank) / V: the bank reported is atan(V rate / (eta g))."""
+        ...
+
+    @property
     def stream_defaults(self) -> StreamTable:
         """The streams it sends without being asked (message id -> interval s; None: the
         simulator's telemetry rate; negative: only on request), and the set a message interval
@@ -370,7 +376,7 @@ class SimVehicle:
             lim.max_speed_m_s - lim.min_speed_m_s
         )
         climb = self.climb_m_s / CLIMB_RATE_M_S
-        bank = 1.0 / math.cos(telemetry.roll_rad(self.state)) - 1.0
+        bank = 1.0 / math.cos(telemetry.roll_rad(self.state, self.autopilot.turn_efficiency)) - 1.0
         return max(0.0, min(1.0, trim + 0.5 * speed + (1.0 - trim) * climb + 0.5 * bank))
 
     def _detect(self, dt_s: float) -> None:
@@ -636,9 +642,9 @@ class SimVehicle:
         if msg_id == mavlink.MAVLINK_MSG_ID_BATTERY_STATUS:
             return telemetry.battery_status(self._battery_fraction)
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
-            return telemetry.attitude(s, t_s)
+            return telemetry.attitude(s, t_s, self.autopilot.turn_efficiency)
         if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
-            return telemetry.attitude_quaternion(s, t_s)
+            return telemetry.attitude_quaternion(s, t_s, self.autopilot.turn_efficiency)
         if msg_id == mavlink.MAVLINK_MSG_ID_WIND_COV:
             return telemetry.wind_cov(t_s, self.wind_east_m_s, self.wind_north_m_s)
         if msg_id == MSG_ID_WIND:

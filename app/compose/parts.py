@@ -83,6 +83,7 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         link_timeout_s=cfg.link.link_timeout_s,
         clock_window_s=cfg.link.clock_window_s,
         camera_component_id=cfg.link.camera_component_id,
+        arduplane_turn_learning=cfg.link.arduplane_turn_learning,
     )
 
 

@@ -166,6 +166,9 @@ class LinkSettings(StrictModel):
     listened for on PORT+i), or ``off`` (docs/vehicle-link.md).
     ``camera_component_id``: the MAVLink component whose CAMERA_TRACKING_GEO_STATUS the links
     take (the built-in simulator's cameras send from it).
+    ``arduplane_turn_learning``: on ArduPlane, learn in flight how much of the coordinated turn
+    the aircraft flies at a bank and size GUIDED_CHANGE_HEADING's turn limit and the heading
+    command for it (docs/vehicle-link.md); false: size them on the coordinated turn.
     """
 
     connect: list[str] = Field(default_factory=list)
@@ -181,6 +184,7 @@ class LinkSettings(StrictModel):
     clock_window_s: Positive = 10.0
     gcs_forward: str = "udpout:127.0.0.1:14550"
     camera_component_id: Annotated[int, Field(ge=2, le=255)] = 100  # MAV_COMP_ID_CAMERA
+    arduplane_turn_learning: bool = True
 
     @field_validator("gcs_forward")
     @classmethod
@@ -200,7 +204,8 @@ class LinkSettings(StrictModel):
 class SimSettings(StrictModel):
     """The built-in simulator when no ``connect`` URLs are given. ``autopilot``: the personality
     its vehicles answer MAVLink with (``px4``: PX4 v1.16 fixed-wing; ``arduplane``: ArduPlane
-    4.6; docs/simulator.md)."""
+    4.6; docs/simulator.md). ``arduplane_turn_efficiency``: the ArduPlane airframe's course rate
+    at a bank as a fraction of the coordinated turn's (0.70, as real ArduPlane 4.6.2 SITL)."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
     speedup: Speedup = 3.0
@@ -210,6 +215,7 @@ class SimSettings(StrictModel):
     telemetry_rate_hz: Positive = 10.0
     camera: CameraModel = CameraModel()
     wind: WindModel = WindModel()
+    arduplane_turn_efficiency: Annotated[float, Field(gt=0.0, le=1.0)] = 0.70
 
 
 class BusLoginConfig(StrictModel):

@@ -182,6 +182,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             camera=cfg.sim.camera.build(),
             camera_component_id=cfg.link.camera_component_id,
             wind=cfg.sim.wind.build(),
+            arduplane_turn_efficiency=cfg.sim.arduplane_turn_efficiency,
             # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a
             # scheduling hiccup of a loaded machine at a speed-up, trip the offboard failsafe
             offboard_timeout_min_wall_s=1.0,

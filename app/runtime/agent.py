@@ -50,6 +50,7 @@ from app.runtime.ports.vehicle import (
     OffboardLostError,
     SetpointLimited,
     TargetObservation,
+    TurnLearned,
     VehicleLink,
     VehicleTelemetry,
 )
@@ -707,6 +708,15 @@ class VehicleAgent:
                         boot_s=event.boot_s,
                         previous_boot_s=event.previous_boot_s,
                         offset_s=round(event.offset_s, 3),
+                    )
+                case TurnLearned():
+                    self._events.emit(
+                        "turn_efficiency_learned",
+                        event.t_s,
+                        vehicle=self.params.vehicle,
+                        efficiency=round(event.efficiency, 3),
+                        samples=event.samples,
+                        turning_s=round(event.turning_s, 1),
                     )
                 case SetpointLimited() if not _log_spaced(event.count):
                     pass  # counted in the link's summary; the log gets the 1st, 2nd, 5th, 10th...

@@ -206,8 +206,27 @@ class ClockRebased:
     previous_offset_s: float | None
 
 
+@dataclass(frozen=True, slots=True)
+class TurnLearned:
+    """The adapter learned (or re-learned) how much of the coordinated turn the airframe flies
+    at a bank, ``efficiency``, from ``samples`` samples over ``turning_s`` s of turning, and
+    sizes its turn commands on it (the ArduPlane adapter's ``turn_efficiency``)."""
+
+    vehicle_id: int
+    t_s: float
+    efficiency: float
+    samples: int
+    turning_s: float
+
+
 LinkEvent = (
-    LinkLost | LinkRestored | LeftOffboard | SetpointLimited | VehicleClockReset | ClockRebased
+    LinkLost
+    | LinkRestored
+    | LeftOffboard
+    | SetpointLimited
+    | VehicleClockReset
+    | ClockRebased
+    | TurnLearned
 )
 
 

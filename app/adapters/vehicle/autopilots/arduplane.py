@@ -33,6 +33,11 @@ from app.adapters.vehicle.autopilots.base import (
     send_checked_command,
 )
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.autopilots.turn_efficiency import (
+    GRAVITY_M_S2,
+    TurnEfficiency,
+    TurnEfficiencyParams,
+)
 from app.core.frames import wrap_pi
 from app.errors import LinkError
 from app.runtime.ports.vehicle import CourseSpeedCommand
@@ -50,8 +55,6 @@ ARDUPLANE_TAKEOFF: Final = mavlink.PLANE_MODE_TAKEOFF
 MIN_LATERAL_ACCEL_M_S2: Final = 0.05
 #: GUIDED's heading loop gain: bank (centidegrees) per radian of course-over-ground error
 GUIDED_P: Final = "GUIDED_P"
-#: standard gravity (m/s^2), as ArduPilot's GRAVITY_MSS
-GRAVITY_M_S2: Final = 9.80665
 #: the most course error a linearised heading command asks of ArduPlane (rad)
 MAX_LINEARISED_ERROR_RAD: Final = math.radians(80.0)
 #: the rate asked for each message the link steers or reports on (Hz), unless told otherwise:
@@ -116,6 +119,17 @@ class ArduPlaneAdapter:
     command is sent again when that limit changes by more than ``accel_deadband`` (10 %).
     With ``linearise_heading`` (and GUIDED_P read in ``prepare``) the course sent is the one
     that makes GUIDED's P loop turn at the rate the guidance assumes (``linearised_course``).
+
+    **Turn efficiency.** Both of those take the turn at a bank to be the coordinated one,
+    g tan(bank) / v. Real ArduPlane 4.6.2 SITL turned at 0.70 of it at every airspeed, so the
+    bank limit held it to 0.14 rad/s for an envelope of 0.2 and the aircraft orbited 40-70 m
+    outside a 90 m circle. With ``learn_turn_efficiency`` every frame the adapter sends on
+    (GUIDED only) goes to a ``TurnEfficiency`` fit (course rate against g tan(bank) / v, the
+    bank from ATTITUDE); once it is ready the acceleration limit is v * max course rate / eta
+    and the linearised command banks atan(k e v / (eta g)), so the envelope's course rate is
+    what is flown. The fit is logged when it is first ready and whenever eta moves by more
+    than ``efficiency_report_change`` (10 %). eta is at least 0.4 (``TurnEfficiencyParams``), and
+    ArduPlane itself caps the bank at ROLL_LIMIT_DEG.
     The altitude command's param3 is 0: ArduPlane 4.6's GUIDED altitude slew
     (``ModeGuided::update_target_altitude``) gives TECS the *current* altitude moved toward
     the command by param3 x 0.1 s every 0.1 s, so at 3 m/s TECS saw 0.3 m of error and the
@@ -177,6 +191,11 @@ class ArduPlaneAdapter:
     altitude_deadband_m: float = 0.5
     accel_deadband: float = 0.1
     linearise_heading: bool = True
+    learn_turn_efficiency: bool = True
+    turn_efficiency_params: TurnEfficiencyParams = field(default_factory=TurnEfficiencyParams)
+    efficiency_report_change: float = 0.1
+    #: told (t_s, eta, samples, turning_s) whenever the efficiency is logged
+    on_turn_learned: Callable[[float, float, int, float], None] | None = None
     telemetry_rates_hz: Mapping[str, float] | None = field(
         default_factory=arduplane_telemetry_rates
     )
@@ -188,6 +207,9 @@ class ArduPlaneAdapter:
     #: GUIDED_P as read in ``prepare`` (centidegrees of bank per radian); None: not linearised
     _guided_p: float | None = field(default=None, init=False)
     _speed_sent: float | None = field(default=None, init=False)
+    _turn: TurnEfficiency = field(init=False)
+    #: the efficiency last logged (None: not yet ready)
+    _efficiency_reported: float | None = field(default=None, init=False)
     _altitude_sent: float | None = field(default=None, init=False)
     _journal: ParamJournal = field(init=False)
 
@@ -198,6 +220,37 @@ class ArduPlaneAdapter:
         if not (math.isfinite(wait) and wait >= 0.0):
             raise ValueError(f"gcs_heartbeat_wait_s must be finite and >= 0, got {wait!r}")
         self._journal = ParamJournal(self.vehicle_id)
+        self._turn = TurnEfficiency(self.turn_efficiency_params)
+
+    @property
+    def turn_efficiency(self) -> float:
+        """eta the bank limit and the linearised command are sized with (1 until learned or
+        when not learning)."""
+        return self._turn.efficiency if self.learn_turn_efficiency else 1.0
+
+    def observe(self, state: VehicleState) -> None:
+        """Feed one frame to the turn-efficiency fit; log it when it is new or has moved."""
+        if not self.learn_turn_efficiency:
+            return
+        self._turn = self._turn.update(
+            state.t_s, state.course_rad, state.roll_rad, state.flying_speed_m_s
+        )
+        if not self._turn.ready:
+            return
+        eta, last = self._turn.efficiency, self._efficiency_reported
+        if last is not None and abs(eta - last) <= self.efficiency_report_change * last:
+            return
+        self._efficiency_reported = eta
+        log.info(
+            "vehicle %d: turns at %.2f of the coordinated rate for its bank (%d samples, "
+            "%.0f s turning): bank limit and heading command sized for it",
+            self.vehicle_id,
+            eta,
+            self._turn.samples,
+            self._turn.turning_s,
+        )
+        if self.on_turn_learned is not None:
+            self.on_turn_learned(state.t_s, eta, self._turn.samples, self._turn.turning_s)
 
     @property
     def honours_speed(self) -> bool:
@@ -290,8 +343,9 @@ class ArduPlaneAdapter:
         turns at g tan(bank) / V: a course-loop gain g P' / V that halves from 10 to 20 m/s.
         Guidance assumes rate = k e with k the envelope's ``course_gain_per_s``. So for the
         wanted error e = wrap(command - course) this sends the error e' with
-        P' e' = atan(k e V / g): ArduPlane then turns at k e at any airspeed V (the speed flown,
-        else the commanded one). Unchanged when GUIDED_P was not read."""
+        P' e' = atan(k e V / (eta g)), eta the ``turn_efficiency``: ArduPlane then turns at k e
+        at any airspeed V (the speed flown, else the commanded one). Unchanged when GUIDED_P was
+        not read."""
         p = self._guided_p
         if p is None:
             return course_rad
@@ -301,7 +355,8 @@ class ArduPlaneAdapter:
             speed = max(state.flying_speed_m_s, 1.0)
         error = wrap_pi(course_rad - state.course_rad)
         k = self.limits.envelope.course_gain_per_s
-        wanted = math.atan(k * error * speed / GRAVITY_M_S2) / bank_per_rad
+        eta = self.turn_efficiency
+        wanted = math.atan(k * error * speed / (eta * GRAVITY_M_S2)) / bank_per_rad
         wanted = max(-MAX_LINEARISED_ERROR_RAD, min(MAX_LINEARISED_ERROR_RAD, wanted))
         return wrap_pi(state.course_rad + wanted)
 
@@ -418,13 +473,14 @@ class ArduPlaneAdapter:
         )
 
     def lateral_accel_limit(self, speed_m_s: float, flying_speed_m_s: float | None) -> float:
-        """v * max course rate (m/s^2), v the larger of the commanded speed and the speed
-        flown (when known and finite), at least ArduPlane's floor of 0.05."""
+        """v * max course rate / eta (m/s^2), v the larger of the commanded speed and the speed
+        flown (when known and finite), eta the ``turn_efficiency``, at least ArduPlane's floor
+        of 0.05."""
         speed = speed_m_s
         if flying_speed_m_s is not None and math.isfinite(flying_speed_m_s):
             speed = max(speed, flying_speed_m_s)
         rate = self.limits.envelope.max_course_rate_rad_s
-        return max(speed * rate, MIN_LATERAL_ACCEL_M_S2)
+        return max(speed * rate / self.turn_efficiency, MIN_LATERAL_ACCEL_M_S2)
 
     def heading_command(
         self, course_rad: float, speed_m_s: float, flying_speed_m_s: float | None = None
@@ -482,6 +538,7 @@ class ArduPlaneAdapter:
         # the course that goes out (linearised, it moves as the vehicle turns even for a
         # constant wanted course, and comes to it as the error closes) is what the deadband
         # compares with the last one sent
+        self.observe(state)
         course, accel_sent = self._course_sent, self._accel_sent
         sent = self.linearised_course(setpoint.course_rad, state, setpoint.speed_m_s)
         accel = self.lateral_accel_limit(setpoint.speed_m_s, state.flying_speed_m_s)

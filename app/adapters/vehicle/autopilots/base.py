@@ -119,6 +119,9 @@ class VehicleState:
     PX4 adapter needs; ``None`` when the vehicle sends none. ``flying_speed_m_s`` is the speed
     the airframe flies now (the autopilot's airspeed where it reports one, else its ground
     speed; ``None`` unknown), which the ArduPlane adapter sizes its turn limit on.
+    ``roll_rad`` is the newest bank the autopilot reports (ATTITUDE, > 0 right; ``None`` when
+    none has come lately), from which the ArduPlane adapter learns how much of the coordinated
+    turn the airframe flies (``turn_efficiency``).
     """
 
     t_s: float
@@ -126,6 +129,7 @@ class VehicleState:
     relative_altitude_m: float
     local_ned_m: tuple[float, float, float] | None = None
     flying_speed_m_s: float | None = None
+    roll_rad: float | None = None
 
 
 def check_finite(values: Mapping[str, float], what: str) -> None:

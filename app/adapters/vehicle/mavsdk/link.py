@@ -59,6 +59,7 @@ from app.runtime.ports.vehicle import (
     OffboardLostError,
     SetpointLimited,
     TargetObservation,
+    TurnLearned,
     VehicleClockReset,
     VehicleTelemetry,
 )
@@ -67,6 +68,8 @@ log = logging.getLogger(__name__)
 
 #: an autopilot wind estimate older than this (wall s) is no longer given with the frames
 WIND_STALE_S = 10.0
+#: a bank (ATTITUDE) older than this (s) is not given to the adapter
+ROLL_STALE_S = 1.0
 
 
 #: what MAVSDK reports before it has heard the autopilot's HEARTBEAT
@@ -87,6 +90,8 @@ class LinkConfig:
     failsafe return the aircraft (False: leave SYSID_MYGCS, FS_GCS_ENABL, FS_LONG_ACTN alone).
     ``arduplane_airspeed_check``: on ArduPlane, refuse a vehicle whose AIRSPEED_MIN..MAX does
     not hold the mission's speeds (False: do not read them).
+    ``arduplane_turn_learning``: on ArduPlane, size the turn limit and the heading command on
+    the turn efficiency learned in flight (``ArduPlaneAdapter.learn_turn_efficiency``).
     ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
@@ -109,6 +114,7 @@ class LinkConfig:
     px4_offboard_loss_action: int | None = 5
     arduplane_gcs_failsafe: bool = True
     arduplane_airspeed_check: bool = True
+    arduplane_turn_learning: bool = True
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -174,6 +180,9 @@ class MavsdkVehicleLink:
         self._mission_clock = mission_clock
         self._boot_clock = BootClockMap(config.clock_window_s, config.clock_reset_s)
         self._airspeed_m_s: float | None = None
+        #: the autopilot's newest bank (ATTITUDE roll, rad) and the link-clock time it came
+        self._roll_rad: float | None = None
+        self._roll_at_s = -math.inf
         #: the autopilot's newest wind estimate and the monotonic time it came
         self._wind: tuple[float, float] | None = None
         self._wind_at_s = -math.inf
@@ -281,6 +290,7 @@ class MavsdkVehicleLink:
                 "heartbeat": self._read_heartbeat(),
                 "position": self._read_global_position(),
                 "airspeed": self._read_airspeed(),
+                "attitude": self._read_attitude(),
                 "wind": self._read_wind(name),
                 "health": self._read_health(),
                 "in-air": self._read_in_air(),
@@ -371,6 +381,8 @@ class MavsdkVehicleLink:
                 limits=limits,
                 gcs_system_id=self._gcs_system_id if self._config.arduplane_gcs_failsafe else None,
                 check_airspeed_range=self._config.arduplane_airspeed_check,
+                learn_turn_efficiency=self._config.arduplane_turn_learning,
+                on_turn_learned=self._turn_learned,
                 target_component=self._config.autopilot_component_id,
             )
         return VelocityAdapter(vehicle_id=self._id, offboard=self._offboard_plugin, limits=limits)
@@ -557,6 +569,22 @@ class MavsdkVehicleLink:
                 except (ValueError, KeyError, TypeError) as exc:
                     self._malformed("VFR_HUD", exc)
 
+    def _turn_learned(self, t_s: float, efficiency: float, samples: int, turning_s: float) -> None:
+        self._events.publish(TurnLearned(self._id, t_s, efficiency, samples, turning_s))
+
+    async def _read_attitude(self) -> None:
+        async with aclosing(self._direct.subscribe_message("ATTITUDE")) as messages:
+            async for message in messages:
+                if message.component_id != self._config.autopilot_component_id:
+                    continue
+                try:
+                    roll = telemetry.attitude_roll(telemetry.fields(message))
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("ATTITUDE", exc)
+                    continue
+                if roll is not None:
+                    self._roll_rad, self._roll_at_s = roll, self._clock()
+
     async def _read_wind(self, adapter: str) -> None:
         """The autopilot's wind estimate: WIND_COV from PX4, WIND (ardupilotmega) from
         ArduPilot."""
@@ -716,6 +744,7 @@ class MavsdkVehicleLink:
             flying_speed_m_s=(
                 latest.airspeed_m_s if latest.airspeed_m_s is not None else latest.ground_speed_m_s
             ),
+            roll_rad=(self._roll_rad if self._clock() - self._roll_at_s <= ROLL_STALE_S else None),
         )
 
     async def start_offboard(self, first: CourseSpeedCommand) -> None:

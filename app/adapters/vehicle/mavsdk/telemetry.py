@@ -131,6 +131,13 @@ def vfr_hud_airspeed(f: dict[str, Any]) -> float | None:
     return airspeed if math.isfinite(airspeed) and airspeed >= 0.0 else None
 
 
+def attitude_roll(f: dict[str, Any]) -> float | None:
+    """ATTITUDE: the roll (rad, > 0 right wing down); None when it is not a finite bank
+    within +-pi/2."""
+    roll = float(f["roll"])
+    return roll if math.isfinite(roll) and abs(roll) < 0.5 * math.pi else None
+
+
 def local_position_ned(f: dict[str, Any]) -> tuple[float, float, float]:
     """LOCAL_POSITION_NED: (north, east, down) in metres, the vehicle's own local frame."""
     return float(f["x"]), float(f["y"]), float(f["z"])
