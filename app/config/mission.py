@@ -204,8 +204,13 @@ class LinkSettings(StrictModel):
 class SimSettings(StrictModel):
     """The built-in simulator when no ``connect`` URLs are given. ``autopilot``: the personality
     its vehicles answer MAVLink with (``px4``: PX4 v1.16 fixed-wing; ``arduplane``: ArduPlane
-    4.6; docs/simulator.md). ``arduplane_turn_efficiency``: the ArduPlane airframe's course rate
-    at a bank as a fraction of the coordinated turn's (0.70, as real ArduPlane 4.6.2 SITL)."""
+    4.6; docs/simulator.md). The personality's behaviours are the ``sitl.config.SimConfig``
+    fields of the same names, each defaulting to what the real autopilot does (docs/simulator.md
+    has the table): ``boot_spacing_s``, ``takeoff``, ``px4_offboard_speed``,
+    ``px4_trim_airspeed_m_s``, ``px4_curvature_sign``, ``arduplane_stream_rate_hz``,
+    ``arduplane_guided_heading``, ``arduplane_turn_efficiency`` (the airframe's course rate at a
+    bank as a fraction of the coordinated turn's: 0.70, as real ArduPlane 4.6.2 SITL),
+    ``arduplane_gcs_seen_at_boot`` and ``arduplane_guided_rebase``."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
     speedup: Speedup = 3.0
@@ -215,7 +220,16 @@ class SimSettings(StrictModel):
     telemetry_rate_hz: Positive = 10.0
     camera: CameraModel = CameraModel()
     wind: WindModel = WindModel()
+    boot_spacing_s: NonNegative = 3.7
+    takeoff: Literal["runway", "launch"] = "runway"
+    px4_offboard_speed: Literal["trim", "setpoint"] = "trim"
+    px4_trim_airspeed_m_s: Positive | None = None
+    px4_curvature_sign: Literal["v1.16.0", "ned"] = "v1.16.0"
+    arduplane_stream_rate_hz: NonNegative = 1.0
+    arduplane_guided_heading: Literal["pid", "ideal"] = "pid"
     arduplane_turn_efficiency: Annotated[float, Field(gt=0.0, le=1.0)] = 0.70
+    arduplane_gcs_seen_at_boot: bool = True
+    arduplane_guided_rebase: bool = True
 
 
 class BusLoginConfig(StrictModel):

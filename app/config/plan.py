@@ -182,7 +182,16 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             camera=cfg.sim.camera.build(),
             camera_component_id=cfg.link.camera_component_id,
             wind=cfg.sim.wind.build(),
+            boot_spacing_s=cfg.sim.boot_spacing_s,
+            takeoff=cfg.sim.takeoff,
+            px4_offboard_speed=cfg.sim.px4_offboard_speed,
+            px4_trim_airspeed_m_s=cfg.sim.px4_trim_airspeed_m_s,
+            px4_curvature_sign=cfg.sim.px4_curvature_sign,
+            arduplane_stream_rate_hz=cfg.sim.arduplane_stream_rate_hz,
+            arduplane_guided_heading=cfg.sim.arduplane_guided_heading,
             arduplane_turn_efficiency=cfg.sim.arduplane_turn_efficiency,
+            arduplane_gcs_seen_at_boot=cfg.sim.arduplane_gcs_seen_at_boot,
+            arduplane_guided_rebase=cfg.sim.arduplane_guided_rebase,
             # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a
             # scheduling hiccup of a loaded machine at a speed-up, trip the offboard failsafe
             offboard_timeout_min_wall_s=1.0,

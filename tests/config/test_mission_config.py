@@ -1,11 +1,14 @@
+import dataclasses
 import math
 
 import pytest
+from pydantic import ValidationError
 
 from app.config import load_config, validate_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan, sim_config
 from app.errors import ConfigError
+from sitl.config import SimConfig
 
 MISSIONS = ("hil", "px4-sitl", "ardupilot-sitl", "phase-mission")
 
@@ -50,6 +53,66 @@ def test_the_simulator_launches_the_team_on_the_standby_circle():
         r = math.hypot(v.start.east_m + 1000.0, v.start.north_m)
         assert r == pytest.approx(150.0)
     assert sim.target is plan.target
+
+
+PERSONALITY = (
+    "boot_spacing_s",
+    "takeoff",
+    "px4_offboard_speed",
+    "px4_trim_airspeed_m_s",
+    "px4_curvature_sign",
+    "arduplane_stream_rate_hz",
+    "arduplane_guided_heading",
+    "arduplane_turn_efficiency",
+    "arduplane_gcs_seen_at_boot",
+    "arduplane_guided_rebase",
+)
+
+
+def test_the_sim_table_defaults_to_the_simulators_real_autopilot_behaviour():
+    # a mission file that says nothing flies the personalities as SimConfig defines them
+    plan = build_plan(load_config("hil", MissionConfig))
+    sim = sim_config(plan, base_port=30000)
+    defaults = {f.name: f.default for f in dataclasses.fields(SimConfig)}
+    for name in PERSONALITY:
+        assert getattr(sim, name) == defaults[name], name
+
+
+def test_every_personality_option_is_a_sim_key():
+    changed = {
+        "boot_spacing_s": 0.0,
+        "takeoff": "launch",
+        "px4_offboard_speed": "setpoint",
+        "px4_trim_airspeed_m_s": 16.0,
+        "px4_curvature_sign": "ned",
+        "arduplane_stream_rate_hz": 4.0,
+        "arduplane_guided_heading": "ideal",
+        "arduplane_turn_efficiency": 0.9,
+        "arduplane_gcs_seen_at_boot": False,
+        "arduplane_guided_rebase": False,
+    }
+    assert set(changed) == set(PERSONALITY)
+    raw = load_config("hil", MissionConfig).model_dump()
+    raw["sim"] |= changed
+    sim = sim_config(build_plan(MissionConfig.model_validate(raw)), base_port=30000)
+    assert {name: getattr(sim, name) for name in PERSONALITY} == changed
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("takeoff", "catapult"),
+        ("arduplane_turn_efficiency", 1.5),
+        ("arduplane_turn_efficiency", 0.0),
+        ("boot_spacing_s", -1.0),
+        ("px4_offboard_speed", "fast"),
+    ],
+)
+def test_a_bad_personality_key_is_refused_by_name(key, value):
+    raw = load_config("hil", MissionConfig).model_dump()
+    raw["sim"][key] = value
+    with pytest.raises(ValidationError, match=key):
+        MissionConfig.model_validate(raw)
 
 
 BASE = load_config("hil", MissionConfig).model_dump()
