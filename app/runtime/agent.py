@@ -198,6 +198,11 @@ class VehicleAgent:
                 autopilot=link.autopilot_name,
                 honours_speed=link.honours_speed,
             )
+        limit = link.course_error_limit_rad
+        if params.course_id is not None and limit is not None:
+            # where the autopilot's own turn command saturates, the identification stops
+            # fitting (``course_id``: a weak loop is not taken for a weaker one)
+            params = replace(params, course_id=replace(params.course_id, command_limit_rad=limit))
         self.params = params
         self.name = topics.agent(params.vehicle)
         self.state = logic.initial_agent_state(

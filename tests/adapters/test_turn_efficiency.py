@@ -192,3 +192,38 @@ async def test_a_vehicle_that_reports_no_bank_is_steered_on_the_coordinated_turn
         state = replace(STATE, t_s=t, course_rad=course, roll_rad=roll, flying_speed_m_s=speed)
         await plane.send(CourseSpeedCommand(course + 0.2, speed), 100.0, state)
     assert plane.turn_efficiency == 1.0
+
+
+def saturating_error(plane: ArduPlaneAdapter) -> float | None:
+    return plane.course_error_limit_rad
+
+
+async def test_the_linearised_command_saturates_at_the_envelopes_rate_over_its_gain():
+    plane = adapter()
+    assert saturating_error(plane) is None  # GUIDED_P not read yet: not linearised
+    await plane.prepare()
+    assert saturating_error(plane) == pytest.approx(0.2 / 1.0)
+    # at that wanted error the bank asked for is the limit sent, at any speed and efficiency
+    await flown_through(plane, turning(0.7, 30.0))
+    saturating = saturating_error(plane)
+    assert saturating is not None
+    for speed in (10.0, 18.0):
+        state = replace(STATE, course_rad=0.0, flying_speed_m_s=speed)
+        sent = plane.linearised_course(saturating, state, speed)
+        bank = math.radians(5000.0 / 100.0) * sent
+        limit = math.atan(plane.lateral_accel_limit(speed, speed) / GRAVITY_M_S2)
+        assert bank == pytest.approx(limit, rel=1e-9)
+
+
+async def test_without_guided_p_no_saturating_error_is_claimed():
+    params = ParamRecorder({k: v for k, v in STOCK_ARDUPLANE.items() if k != "GUIDED_P"})
+    plane = ArduPlaneAdapter(
+        vehicle_id=1,
+        commands=CommandRecorder(),
+        params=params,
+        limits=LIMITS,
+        telemetry_rates_hz=None,
+        gcs_system_id=None,
+    )
+    await plane.prepare()
+    assert plane.course_error_limit_rad is None

@@ -130,6 +130,41 @@ def test_a_loop_always_saturated_is_never_ready() -> None:
     assert est.gain_per_s == PARAMS.prior_gain_per_s
 
 
+def _fly_bank_limited(k_true: float, seconds: float = 180.0) -> list[cid.CourseSample]:
+    """An autopilot whose turn command saturates at a course error of W / 1 (the ArduPlane
+    adapter's bank limit, sized for the k = 1 it assumes) and whose real gain is ``k_true``:
+    rate = k_true * clamp(e, -W, W). Commanded errors sweep +-0.5 rad, mostly beyond it."""
+    samples, course, t, dt = [], 0.0, 0.0, 0.02
+    command = 0.0
+    while t < seconds:
+        if round(t / 0.1, 6).is_integer():
+            command = wrap_pi(course + 0.5 * math.sin(0.4 * t) + 0.1 * math.sin(1.3 * t))
+            samples.append(cid.CourseSample(t, course, command))
+        error = max(-W, min(W, wrap_pi(command - course)))
+        course = wrap_pi(course + k_true * error * dt)
+        t = round(t + dt, 9)
+    return samples
+
+
+def test_where_the_autopilots_command_saturates_nothing_beyond_it_is_fitted() -> None:
+    """A loop 0.7 times as strong as assumed turns at 0.7 W when its command saturates, under
+    the rate test's 0.8 W: fitted, those samples take k for W / e and put it far too low.
+    Told where the command saturates, the identifier fits only below it and finds 0.7."""
+    samples = _fly_bank_limited(0.7)
+    _, blind = _identify(samples)
+    state, told = _identify(samples, replace(PARAMS, command_limit_rad=W))
+    assert told.ready
+    assert told.gain_per_s == pytest.approx(_effective_gain(0.7), rel=0.05)
+    assert blind.gain_per_s < 0.8 * told.gain_per_s
+    assert state.saturated > 100
+
+
+def test_a_command_limit_must_be_an_angle() -> None:
+    for bad in (0.0, -0.1, 4.0, math.nan):
+        with pytest.raises(ValueError, match="command_limit_rad"):
+            replace(PARAMS, command_limit_rad=bad)
+
+
 def test_straight_flight_is_quiet_and_never_ready() -> None:
     state, est = _identify(_fly(0.55, 0.0, lead_rad=0.0, seconds=30.0))
     assert not est.ready

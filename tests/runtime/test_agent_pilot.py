@@ -262,6 +262,20 @@ async def test_the_phase_actuator_is_resolved_against_what_the_autopilot_honours
     assert event["configured"] == configured
 
 
+@pytest.mark.parametrize("limit", [None, 0.2])
+async def test_the_course_identification_is_told_where_the_autopilots_command_saturates(
+    limit: float | None,
+) -> None:
+    plan = build_plan(load_config("ardupilot-sitl", MissionConfig))
+    assert plan.agents[0].course_id is not None
+    link = QueueLink()
+    link.course_error_limit_rad = limit
+    async with InProcessBus(InProcessBroker(), client_id="agent-1") as agent_bus:
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
+    assert agent.params.course_id is not None
+    assert agent.params.course_id.command_limit_rad == limit
+
+
 @pytest.mark.parametrize(
     ("line", "command", "vehicles"),
     # vehicles numbered from 1 as the live view prints them; the command carries the indices

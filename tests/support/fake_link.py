@@ -27,6 +27,7 @@ class QueueLink:
     autopilot_name = "fake"
     link_ok = True
     honours_speed = True
+    course_error_limit_rad: float | None = None
 
     def __init__(self) -> None:
         self.frames: asyncio.Queue[VehicleTelemetry] = asyncio.Queue()

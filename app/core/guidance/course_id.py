@@ -31,7 +31,15 @@ Samples and which are used:
   the window (k_check: the estimate once ready, else the lower bound of k: a saturated loop
   turns at W whatever its k, so the rate test is what rejects saturation; the prior would
   also reject a weaker loop flown at the prior's clamp W / k_prior, where such a loop is not
-  saturated and most informative) and |e| >= ``min_error_rad``.
+  saturated and most informative) and |e| >= ``min_error_rad``; and, where the autopilot's
+  own turn command saturates at a course error whatever the loop's gain
+  (``command_limit_rad``: the ArduPlane adapter's bank limit is reached at e = W / k_assumed),
+  |e| < ``saturation_fraction`` x that for every candidate delay and interval. Without that
+  test a loop weaker than the adapter assumes (0.7 rad/s where 1 was assumed) turns at less
+  than W in that saturation, passes the rate test, and is identified at W / e, lower than it
+  is: flown with that k the course command asks for still larger errors, more of them
+  saturated, and the estimate runs down (real ArduPlane 4.6.2 SITL: 0.87 -> 0.36 /s over a
+  mission, with the demanded bank at its limit half the time).
   The others are counted (``saturated``, ``quiet``).
 - A non-finite sample is dropped and counted; a tick not later than the last one, a gap longer
   than ``max_gap_s`` or a tick with no command sent (``command_rad`` None: the vehicle flies
@@ -70,7 +78,9 @@ class CourseIdParams:
     are informative (module docstring); ``min_informative_s`` and ``max_rel_se``: when the
     estimate is ready; ``max_gap_s``: the longest tick interval a rate is measured across;
     ``delay_switch_ratio``: a new delay is taken only when its residual is below this fraction
-    of the current delay's (no chatter between neighbours that fit alike).
+    of the current delay's (no chatter between neighbours that fit alike);
+    ``command_limit_rad``: the course error at which the autopilot's own turn command
+    saturates whatever the loop's gain (None: none known; module docstring).
     """
 
     max_rate_rad_s: float
@@ -86,6 +96,7 @@ class CourseIdParams:
     max_rel_se: float = 0.05
     max_gap_s: float = 2.0
     delay_switch_ratio: float = 0.9
+    command_limit_rad: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("max_rate_rad_s", "memory_s", "min_informative_s", "max_gap_s"):
@@ -114,6 +125,11 @@ class CourseIdParams:
         if not (math.isfinite(self.min_error_rad) and 0.0 <= self.min_error_rad < math.pi):
             raise ValueError(
                 f"CourseIdParams.min_error_rad must be in [0, pi), got {self.min_error_rad!r}"
+            )
+        limit = self.command_limit_rad
+        if limit is not None and not (math.isfinite(limit) and 0.0 < limit <= math.pi):
+            raise ValueError(
+                f"CourseIdParams.command_limit_rad must be in (0, pi] or None, got {limit!r}"
             )
         for name in ("saturation_fraction", "max_rel_se", "delay_switch_ratio"):
             value = getattr(self, name)
@@ -297,7 +313,12 @@ def _fold(
     now = estimate(state, params)
     k_check = now.gain_per_s if now.ready else params.min_gain_per_s
     limit = params.saturation_fraction * params.max_rate_rad_s
-    if abs(rate) >= limit or k_check * peak >= limit:
+    command_limit = params.command_limit_rad
+    if (
+        abs(rate) >= limit
+        or k_check * peak >= limit
+        or (command_limit is not None and peak >= params.saturation_fraction * command_limit)
+    ):
         return {"window": window, "saturated": state.saturated + 1}
     if abs(regressors[state.delay_index]) < params.min_error_rad:
         return {"window": window, "quiet": state.quiet + 1}

@@ -278,6 +278,13 @@ class VehicleLink(Protocol):
         ...
 
     @property
+    def course_error_limit_rad(self) -> float | None:
+        """The course error (command - course, rad) at which the autopilot's own turn command
+        saturates whatever its loop's gain (the ArduPlane adapter's bank limit), None when
+        it has none: what the course-loop identification must not fit beyond."""
+        ...
+
+    @property
     def latest(self) -> VehicleTelemetry | None:
         """The newest telemetry frame, or None before the first."""
         ...

@@ -256,6 +256,17 @@ class ArduPlaneAdapter:
     def honours_speed(self) -> bool:
         return True
 
+    @property
+    def course_error_limit_rad(self) -> float | None:
+        """W / k (the envelope's rate limit over its assumed gain) once the heading command is
+        linearised: from that wanted error on, the bank asked for is the limit sent in param3,
+        so ArduPlane's turn is saturated whatever its real gain. None when not linearised
+        (the saturating error then depends on the airspeed)."""
+        if self._guided_p is None:
+            return None
+        envelope = self.limits.envelope
+        return min(envelope.max_course_rate_rad_s / envelope.course_gain_per_s, math.pi)
+
     def mode_name(self, custom_mode: int) -> str:
         return arduplane_mode_name(custom_mode)
 

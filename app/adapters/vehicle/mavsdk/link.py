@@ -236,6 +236,10 @@ class MavsdkVehicleLink:
         return self._require_adapter().honours_speed
 
     @property
+    def course_error_limit_rad(self) -> float | None:
+        return getattr(self._require_adapter(), "course_error_limit_rad", None)
+
+    @property
     def latest(self) -> VehicleTelemetry | None:
         return self._latest
 
