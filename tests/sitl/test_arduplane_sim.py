@@ -458,6 +458,7 @@ async def test_arduplane_adapter_is_chosen_takes_off_flies_courses_and_stops_in_
             learned = await next_event(aiter(events), TurnLearned, 1.0)
             assert isinstance(learned, TurnLearned)
             assert learned.efficiency == pytest.approx(0.7, abs=0.05)
+            assert link.counters.turn_efficiency == pytest.approx(learned.efficiency, abs=1e-3)
             assert max(rates) > 0.19
         # leaving the link stops it: LOITER
         assert sim.truth().vehicles[0].mode == "loiter"

@@ -317,7 +317,7 @@ def _fold(
     if (
         abs(rate) >= limit
         or k_check * peak >= limit
-        or (command_limit is not None and peak >= params.saturation_fraction * command_limit)
+        or (command_limit is not None and peak >= command_limit)
     ):
         return {"window": window, "saturated": state.saturated + 1}
     if abs(regressors[state.delay_index]) < params.min_error_rad:

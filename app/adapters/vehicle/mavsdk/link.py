@@ -141,7 +141,8 @@ class LinkConfig:
 
 @dataclass(slots=True)
 class LinkCounters:
-    """What a link dropped or changed, counted (the event log reads these at the end)."""
+    """What a link dropped or changed, counted (the event log reads these at the end);
+    ``turn_efficiency``: the ArduPlane adapter's last learned one (None: not learned)."""
 
     frames: int = 0
     stale_frames: int = 0
@@ -154,6 +155,7 @@ class LinkCounters:
     left_offboard: int = 0
     clock_rebases: int = 0
     limited_by: dict[str, int] = field(default_factory=dict)
+    turn_efficiency: float | None = None
 
 
 class MavsdkVehicleLink:
@@ -574,6 +576,7 @@ class MavsdkVehicleLink:
                     self._malformed("VFR_HUD", exc)
 
     def _turn_learned(self, t_s: float, efficiency: float, samples: int, turning_s: float) -> None:
+        self.counters.turn_efficiency = round(efficiency, 3)
         self._events.publish(TurnLearned(self._id, t_s, efficiency, samples, turning_s))
 
     async def _read_attitude(self) -> None:
