@@ -34,7 +34,9 @@ Samples and which are used:
   saturated and most informative) and |e| >= ``min_error_rad``; and, where the autopilot's
   own turn command saturates at a course error whatever the loop's gain
   (``command_limit_rad``: the ArduPlane adapter's bank limit is reached at e = W / k_assumed),
-  |e| < ``saturation_fraction`` x that for every candidate delay and interval. Without that
+  |e| < that for every candidate delay and interval (no margin: below it the command is not
+  saturated, and a margin would leave out the steady orbit, where the lead sits just under
+  it; in the simulator's ArduPlane 0.8 of it found k only late, at 1.7-2.1 /s). Without that
   test a loop weaker than the adapter assumes (0.7 rad/s where 1 was assumed) turns at less
   than W in that saturation, passes the rate test, and is identified at W / e, lower than it
   is: flown with that k the course command asks for still larger errors, more of them
