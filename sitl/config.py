@@ -226,6 +226,7 @@ class SimConfig:
     (the SRn_* stream rates, 1 Hz as shipped), ``arduplane_guided_heading``,
     ``arduplane_turn_efficiency`` (the course rate flown at a bank, as a fraction of the
     coordinated turn's g tan(bank) / V: 0.70 in real ArduPlane 4.6.2 SITL),
+    ``arduplane_speed_time_constant_s`` (TECS's lag behind a GUIDED speed, 4 s; 0: none),
     ``arduplane_gcs_seen_at_boot`` (ArduPlane counts its own boot as the GCS's last heartbeat)
     and ``arduplane_guided_rebase`` (GUIDED entered holds the altitude it was entered at).
     Each default is what the real autopilot does.
@@ -264,6 +265,7 @@ class SimConfig:
     arduplane_stream_rate_hz: float = 1.0
     arduplane_guided_heading: GuidedHeadingLoop = "pid"
     arduplane_turn_efficiency: float = 0.70
+    arduplane_speed_time_constant_s: float = 4.0
     arduplane_gcs_seen_at_boot: bool = True
     arduplane_guided_rebase: bool = True
 
@@ -323,6 +325,7 @@ class SimConfig:
         if self.px4_trim_airspeed_m_s is not None:
             _positive("px4_trim_airspeed_m_s", self.px4_trim_airspeed_m_s)
         _non_negative("arduplane_stream_rate_hz", self.arduplane_stream_rate_hz)
+        _non_negative("arduplane_speed_time_constant_s", self.arduplane_speed_time_constant_s)
         eta = self.arduplane_turn_efficiency
         if not (math.isfinite(eta) and 0.0 < eta <= 1.0):
             raise ValueError(f"arduplane_turn_efficiency must be in (0, 1], got {eta!r}")

@@ -84,6 +84,7 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         clock_window_s=cfg.link.clock_window_s,
         camera_component_id=cfg.link.camera_component_id,
         arduplane_turn_learning=cfg.link.arduplane_turn_learning,
+        arduplane_speed_learning=cfg.link.arduplane_speed_learning,
     )
 
 

@@ -169,6 +169,8 @@ class LinkSettings(StrictModel):
     ``arduplane_turn_learning``: on ArduPlane, learn in flight how much of the coordinated turn
     the aircraft flies at a bank and size GUIDED_CHANGE_HEADING's turn limit and the heading
     command for it (docs/vehicle-link.md); false: size them on the coordinated turn.
+    ``arduplane_speed_learning``: on ArduPlane, learn how far the airspeed lags the speed
+    command and lead the command through it; false: send the speed wanted.
     """
 
     connect: list[str] = Field(default_factory=list)
@@ -185,6 +187,7 @@ class LinkSettings(StrictModel):
     gcs_forward: str = "udpout:127.0.0.1:14550"
     camera_component_id: Annotated[int, Field(ge=2, le=255)] = 100  # MAV_COMP_ID_CAMERA
     arduplane_turn_learning: bool = True
+    arduplane_speed_learning: bool = True
 
     @field_validator("gcs_forward")
     @classmethod
@@ -210,6 +213,7 @@ class SimSettings(StrictModel):
     ``px4_trim_airspeed_m_s``, ``px4_curvature_sign``, ``arduplane_stream_rate_hz``,
     ``arduplane_guided_heading``, ``arduplane_turn_efficiency`` (the airframe's course rate at a
     bank as a fraction of the coordinated turn's: 0.70, as real ArduPlane 4.6.2 SITL),
+    ``arduplane_speed_time_constant_s`` (TECS's lag behind a GUIDED speed: 4 s),
     ``arduplane_gcs_seen_at_boot`` and ``arduplane_guided_rebase``."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
@@ -228,6 +232,7 @@ class SimSettings(StrictModel):
     arduplane_stream_rate_hz: NonNegative = 1.0
     arduplane_guided_heading: Literal["pid", "ideal"] = "pid"
     arduplane_turn_efficiency: Annotated[float, Field(gt=0.0, le=1.0)] = 0.70
+    arduplane_speed_time_constant_s: NonNegative = 4.0
     arduplane_gcs_seen_at_boot: bool = True
     arduplane_guided_rebase: bool = True
 

@@ -190,6 +190,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             arduplane_stream_rate_hz=cfg.sim.arduplane_stream_rate_hz,
             arduplane_guided_heading=cfg.sim.arduplane_guided_heading,
             arduplane_turn_efficiency=cfg.sim.arduplane_turn_efficiency,
+            arduplane_speed_time_constant_s=cfg.sim.arduplane_speed_time_constant_s,
             arduplane_gcs_seen_at_boot=cfg.sim.arduplane_gcs_seen_at_boot,
             arduplane_guided_rebase=cfg.sim.arduplane_guided_rebase,
             # like PX4's COM_OF_LOSS_T = 1 s: setpoints missing for a second of wall time, not a

@@ -49,6 +49,7 @@ from app.runtime.ports.vehicle import (
     LinkRestored,
     OffboardLostError,
     SetpointLimited,
+    SpeedLagLearned,
     TargetObservation,
     TurnLearned,
     VehicleLink,
@@ -722,6 +723,14 @@ class VehicleAgent:
                         efficiency=round(event.efficiency, 3),
                         samples=event.samples,
                         turning_s=round(event.turning_s, 1),
+                    )
+                case SpeedLagLearned():
+                    self._events.emit(
+                        "speed_lag_learned",
+                        event.t_s,
+                        vehicle=self.params.vehicle,
+                        tau_s=round(event.tau_s, 2),
+                        samples=event.samples,
                     )
                 case SetpointLimited() if not _log_spaced(event.count):
                     pass  # counted in the link's summary; the log gets the 1st, 2nd, 5th, 10th...

@@ -64,6 +64,7 @@ PERSONALITY = (
     "arduplane_stream_rate_hz",
     "arduplane_guided_heading",
     "arduplane_turn_efficiency",
+    "arduplane_speed_time_constant_s",
     "arduplane_gcs_seen_at_boot",
     "arduplane_guided_rebase",
 )
@@ -88,6 +89,7 @@ def test_every_personality_option_is_a_sim_key():
         "arduplane_stream_rate_hz": 4.0,
         "arduplane_guided_heading": "ideal",
         "arduplane_turn_efficiency": 0.9,
+        "arduplane_speed_time_constant_s": 0.0,
         "arduplane_gcs_seen_at_boot": False,
         "arduplane_guided_rebase": False,
     }

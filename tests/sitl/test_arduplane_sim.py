@@ -207,6 +207,27 @@ def test_the_guided_turn_is_that_fraction_of_the_coordinated_one_and_attitude_sh
     assert abs(attitude.roll) == pytest.approx(math.atan(1.8 / 9.80665), rel=1e-3)
 
 
+@pytest.mark.parametrize("tau", [4.0, 0.0])
+def test_the_guided_airspeed_follows_the_command_through_tecs_lag(tau):
+    """Real ArduPlane 4.6.2's airspeed followed GUIDED_CHANGE_SPEED about 3 s late: here a
+    first-order lag of ``arduplane_speed_time_constant_s`` (0: the airframe's acceleration
+    limit alone)."""
+    v = guided_in_the_air(arduplane_speed_time_constant_s=tau)
+    assert v.state.speed_m_s == pytest.approx(18.0)
+    assert command_int(v, MAV_CMD_GUIDED_CHANGE_SPEED, 0, 12.0, 0.0) == ACCEPTED
+    dt = 0.02
+    for k in range(200):  # 4 s
+        v.advance(dt, k * dt, k * dt, 0.0, 0.0)
+    # the airframe's own speed loop is first order too (1 /s, within its 2 m/s^2): in series,
+    # 6 m/s of step decays as (tau e^(-t/tau) - e^(-t)) / (tau - 1)
+    assert v.config.limits.speed_gain_per_s == 1.0
+    if tau:
+        left = 6.0 * (tau * math.exp(-4.0 / tau) - math.exp(-4.0)) / (tau - 1.0)
+    else:
+        left = 6.0 * math.exp(-4.0)  # (its first second is at the 2 m/s^2 limit: a little more)
+    assert v.state.speed_m_s == pytest.approx(12.0 + left, abs=0.2)
+
+
 def test_turn_efficiency_must_be_a_fraction():
     for bad in (0.0, -0.5, 1.2, math.nan):
         with pytest.raises(ValueError, match="arduplane_turn_efficiency"):

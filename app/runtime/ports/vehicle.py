@@ -219,6 +219,18 @@ class TurnLearned:
     turning_s: float
 
 
+@dataclass(frozen=True, slots=True)
+class SpeedLagLearned:
+    """The adapter learned (or re-learned) how far the airspeed lags its speed command, a
+    first-order time constant ``tau_s`` from ``samples`` samples, and leads the command through
+    it (the ArduPlane adapter's ``speed_lag_s``)."""
+
+    vehicle_id: int
+    t_s: float
+    tau_s: float
+    samples: int
+
+
 LinkEvent = (
     LinkLost
     | LinkRestored
@@ -227,6 +239,7 @@ LinkEvent = (
     | VehicleClockReset
     | ClockRebased
     | TurnLearned
+    | SpeedLagLearned
 )
 
 

@@ -33,6 +33,7 @@ from app.adapters.vehicle.autopilots.base import (
     send_checked_command,
 )
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.autopilots.speed_lag import SpeedLag, SpeedLagParams
 from app.adapters.vehicle.autopilots.turn_efficiency import (
     GRAVITY_M_S2,
     TurnEfficiency,
@@ -130,6 +131,13 @@ class ArduPlaneAdapter:
     what is flown. The fit is logged when it is first ready and whenever eta moves by more
     than ``efficiency_report_change`` (10 %). eta is at least 0.4 (``TurnEfficiencyParams``), and
     ArduPlane itself caps the bank at ROLL_LIMIT_DEG.
+
+    **Speed lag.** Real 4.6.2's airspeed followed GUIDED_CHANGE_SPEED about 3 s late (TECS).
+    With ``learn_speed_lag`` every frame goes to a ``SpeedLag`` fit (the airspeed's change
+    against the command in force); once it is ready the speed sent is the wanted one led
+    through that lag (``SpeedLag.lead``: airspeed + (tau / 2 s)(wanted - airspeed), at most 3
+    times), within the envelope's speed range, so that the airspeed closes on the wanted speed
+    in about 2 s. Logged when first learned and when tau moves by 20 %.
     The altitude command's param3 is 0: ArduPlane 4.6's GUIDED altitude slew
     (``ModeGuided::update_target_altitude``) gives TECS the *current* altitude moved toward
     the command by param3 x 0.1 s every 0.1 s, so at 3 m/s TECS saw 0.3 m of error and the
@@ -194,6 +202,10 @@ class ArduPlaneAdapter:
     learn_turn_efficiency: bool = True
     turn_efficiency_params: TurnEfficiencyParams = field(default_factory=TurnEfficiencyParams)
     efficiency_report_change: float = 0.1
+    learn_speed_lag: bool = True
+    #: told (t_s, tau_s, samples) whenever the speed lag is logged
+    on_speed_lag_learned: Callable[[float, float, int], None] | None = None
+    speed_lag_params: SpeedLagParams = field(default_factory=SpeedLagParams)
     #: told (t_s, eta, samples, turning_s) whenever the efficiency is logged
     on_turn_learned: Callable[[float, float, int, float], None] | None = None
     telemetry_rates_hz: Mapping[str, float] | None = field(
@@ -208,6 +220,8 @@ class ArduPlaneAdapter:
     _guided_p: float | None = field(default=None, init=False)
     _speed_sent: float | None = field(default=None, init=False)
     _turn: TurnEfficiency = field(init=False)
+    _speed_lag: SpeedLag = field(init=False)
+    _speed_lag_reported: float | None = field(default=None, init=False)
     #: the efficiency last logged (None: not yet ready)
     _efficiency_reported: float | None = field(default=None, init=False)
     _altitude_sent: float | None = field(default=None, init=False)
@@ -221,6 +235,41 @@ class ArduPlaneAdapter:
             raise ValueError(f"gcs_heartbeat_wait_s must be finite and >= 0, got {wait!r}")
         self._journal = ParamJournal(self.vehicle_id)
         self._turn = TurnEfficiency(self.turn_efficiency_params)
+        self._speed_lag = SpeedLag(self.speed_lag_params)
+
+    @property
+    def speed_lag_s(self) -> float | None:
+        """The airspeed's learned time constant behind the speed command (None: not yet, or
+        not learning)."""
+        return self._speed_lag.tau_s if self.learn_speed_lag else None
+
+    def led_speed(self, wanted_m_s: float, state: VehicleState) -> float:
+        """The speed to send for ``wanted_m_s``: led through the learned lag, within the
+        envelope's speed range (``wanted_m_s`` as it is until the lag is learned)."""
+        if not self.learn_speed_lag:
+            return wanted_m_s
+        led = self._speed_lag.lead(wanted_m_s, state.flying_speed_m_s)
+        envelope = self.limits.envelope
+        return max(envelope.min_speed_m_s, min(envelope.max_speed_m_s, led))
+
+    def _observe_speed(self, state: VehicleState) -> None:
+        sent = self._speed_sent
+        if not self.learn_speed_lag or sent is None:
+            return
+        self._speed_lag = self._speed_lag.update(state.t_s, state.flying_speed_m_s, sent)
+        tau, last = self._speed_lag.tau_s, self._speed_lag_reported
+        if tau is None or (last is not None and abs(tau - last) <= 0.2 * last):
+            return
+        self._speed_lag_reported = tau
+        log.info(
+            "vehicle %d: airspeed follows the speed command with a %.1f s lag (%d samples): "
+            "speed commands led through it",
+            self.vehicle_id,
+            tau,
+            self._speed_lag.samples,
+        )
+        if self.on_speed_lag_learned is not None:
+            self.on_speed_lag_learned(state.t_s, tau, self._speed_lag.samples)
 
     @property
     def turn_efficiency(self) -> float:
@@ -550,6 +599,7 @@ class ArduPlaneAdapter:
         # constant wanted course, and comes to it as the error closes) is what the deadband
         # compares with the last one sent
         self.observe(state)
+        self._observe_speed(state)
         course, accel_sent = self._course_sent, self._accel_sent
         sent = self.linearised_course(setpoint.course_rad, state, setpoint.speed_m_s)
         accel = self.lateral_accel_limit(setpoint.speed_m_s, state.flying_speed_m_s)
@@ -564,10 +614,10 @@ class ArduPlaneAdapter:
                 "GUIDED_CHANGE_HEADING",
             )
             self._course_sent, self._accel_sent = sent, accel
-        speed = self._speed_sent
-        if speed is None or abs(setpoint.speed_m_s - speed) > self.speed_deadband_m_s:
-            await self._send(self.speed_command(setpoint.speed_m_s), "GUIDED_CHANGE_SPEED")
-            self._speed_sent = setpoint.speed_m_s
+        speed, wanted = self._speed_sent, self.led_speed(setpoint.speed_m_s, state)
+        if speed is None or abs(wanted - speed) > self.speed_deadband_m_s:
+            await self._send(self.speed_command(wanted), "GUIDED_CHANGE_SPEED")
+            self._speed_sent = wanted
         alt = self._altitude_sent
         if alt is None or abs(altitude_m - alt) > self.altitude_deadband_m:
             await self._send(self.altitude_command(altitude_m), "GUIDED_CHANGE_ALTITUDE")

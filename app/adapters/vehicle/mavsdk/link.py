@@ -58,6 +58,7 @@ from app.runtime.ports.vehicle import (
     LinkRestored,
     OffboardLostError,
     SetpointLimited,
+    SpeedLagLearned,
     TargetObservation,
     TurnLearned,
     VehicleClockReset,
@@ -91,7 +92,9 @@ class LinkConfig:
     ``arduplane_airspeed_check``: on ArduPlane, refuse a vehicle whose AIRSPEED_MIN..MAX does
     not hold the mission's speeds (False: do not read them).
     ``arduplane_turn_learning``: on ArduPlane, size the turn limit and the heading command on
-    the turn efficiency learned in flight (``ArduPlaneAdapter.learn_turn_efficiency``).
+    the turn efficiency learned in flight (``ArduPlaneAdapter.learn_turn_efficiency``);
+    ``arduplane_speed_learning``: lead its speed commands through the airspeed's learned lag
+    (``learn_speed_lag``).
     ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
@@ -115,6 +118,7 @@ class LinkConfig:
     arduplane_gcs_failsafe: bool = True
     arduplane_airspeed_check: bool = True
     arduplane_turn_learning: bool = True
+    arduplane_speed_learning: bool = True
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -142,7 +146,8 @@ class LinkConfig:
 @dataclass(slots=True)
 class LinkCounters:
     """What a link dropped or changed, counted (the event log reads these at the end);
-    ``turn_efficiency``: the ArduPlane adapter's last learned one (None: not learned)."""
+    ``turn_efficiency``, ``speed_lag_s``: the ArduPlane adapter's last learned ones (None: not
+    learned)."""
 
     frames: int = 0
     stale_frames: int = 0
@@ -156,6 +161,7 @@ class LinkCounters:
     clock_rebases: int = 0
     limited_by: dict[str, int] = field(default_factory=dict)
     turn_efficiency: float | None = None
+    speed_lag_s: float | None = None
 
 
 class MavsdkVehicleLink:
@@ -388,7 +394,9 @@ class MavsdkVehicleLink:
                 gcs_system_id=self._gcs_system_id if self._config.arduplane_gcs_failsafe else None,
                 check_airspeed_range=self._config.arduplane_airspeed_check,
                 learn_turn_efficiency=self._config.arduplane_turn_learning,
+                learn_speed_lag=self._config.arduplane_speed_learning,
                 on_turn_learned=self._turn_learned,
+                on_speed_lag_learned=self._speed_lag_learned,
                 target_component=self._config.autopilot_component_id,
             )
         return VelocityAdapter(vehicle_id=self._id, offboard=self._offboard_plugin, limits=limits)
@@ -578,6 +586,10 @@ class MavsdkVehicleLink:
     def _turn_learned(self, t_s: float, efficiency: float, samples: int, turning_s: float) -> None:
         self.counters.turn_efficiency = round(efficiency, 3)
         self._events.publish(TurnLearned(self._id, t_s, efficiency, samples, turning_s))
+
+    def _speed_lag_learned(self, t_s: float, tau_s: float, samples: int) -> None:
+        self.counters.speed_lag_s = round(tau_s, 2)
+        self._events.publish(SpeedLagLearned(self._id, t_s, tau_s, samples))
 
     async def _read_attitude(self) -> None:
         async with aclosing(self._direct.subscribe_message("ATTITUDE")) as messages:
