@@ -142,3 +142,5 @@ async def test_without_learning_the_speed_goes_out_as_wanted():
     assert plane.speed_lag_s is None
     speeds = {f["param2"] for *_, f in commands.sent if f["command"] == 43000}
     assert speeds == {10.0, 18.0, 12.0, 16.0}
+    # and ArduPlane slews its target at the envelope's acceleration (2 m/s^2)
+    assert {f["param3"] for *_, f in commands.sent if f["command"] == 43000} == {2.0}

@@ -561,11 +561,17 @@ class ArduPlaneAdapter:
         )
 
     def speed_command(self, speed_m_s: float) -> MavlinkMessage:
+        """GUIDED_CHANGE_SPEED: param3 the slew of ArduPlane's airspeed target (m/s^2), the
+        envelope's acceleration, or 0 ("at once", 1000 m/s^2) while the speed is led through
+        the learned lag: a slewed target would slow the led command down, the fit would read
+        that as more lag, and lead harder (real 4.6.2, ap8: tau 3-4 s learned first, 7-8 s by
+        the end)."""
+        slew = 0.0 if self.learn_speed_lag else self.limits.envelope.max_accel_m_s2
         return command_int(
             self.vehicle_id,
             self.target_component,
             mavlink.MAV_CMD_GUIDED_CHANGE_SPEED,
-            (mavlink.SPEED_TYPE_AIRSPEED, speed_m_s, self.limits.envelope.max_accel_m_s2, 0.0),
+            (mavlink.SPEED_TYPE_AIRSPEED, speed_m_s, slew, 0.0),
         )
 
     def altitude_command(self, altitude_m: float) -> MavlinkMessage:
