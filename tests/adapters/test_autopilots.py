@@ -628,8 +628,8 @@ async def test_arduplane_switches_to_guided_then_sends_heading_speed_altitude():
     assert heading[3]["param2"] == pytest.approx(270.0)
     assert heading[3]["param3"] == pytest.approx(3.0)  # 15 m/s * 0.2 rad/s
     assert speed[3]["command"] == 43000
-    # param3 0: no slew of the target while the speed is led through the learned lag
-    assert (speed[3]["param1"], speed[3]["param2"], speed[3]["param3"]) == (0.0, 15.0, 0.0)
+    # param3: ArduPlane slews its target at the envelope's 2 m/s^2 (the speed is not led)
+    assert (speed[3]["param1"], speed[3]["param2"], speed[3]["param3"]) == (0.0, 15.0, 2.0)
     assert altitude[3]["command"] == 43001
     assert altitude[3]["frame"] == 3  # MAV_FRAME_GLOBAL_RELATIVE_ALT
     assert altitude[3]["z"] == 120.0

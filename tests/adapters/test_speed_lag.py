@@ -122,7 +122,7 @@ async def fly_lagged(plane: ArduPlaneAdapter, commands: CommandRecorder, tau_s: 
 
 async def test_the_adapter_leads_its_speed_command_within_the_envelope():
     commands = CommandRecorder()
-    plane = adapter(commands)
+    plane = adapter(commands, learn_speed_lag=True)
     await plane.prepare()
     await fly_lagged(plane, commands, 5.0)
     tau = plane.speed_lag_s
@@ -132,11 +132,13 @@ async def test_the_adapter_leads_its_speed_command_within_the_envelope():
     assert max(speeds) <= 18.0
     # led: a step from 18 down to 12 asks for the floor first, not 12
     assert 10.0 in speeds
+    # and goes out unslewed (param3 0: ArduPlane takes it at once)
+    assert {f["param3"] for *_, f in commands.sent if f["command"] == 43000} == {0.0}
 
 
-async def test_without_learning_the_speed_goes_out_as_wanted():
+async def test_by_default_the_speed_goes_out_as_wanted():
     commands = CommandRecorder()
-    plane = adapter(commands, learn_speed_lag=False)
+    plane = adapter(commands)
     await plane.prepare()
     await fly_lagged(plane, commands, 5.0)
     assert plane.speed_lag_s is None

@@ -137,7 +137,9 @@ class ArduPlaneAdapter:
     against the command in force); once it is ready the speed sent is the wanted one led
     through that lag (``SpeedLag.lead``: airspeed + (tau / 2 s)(wanted - airspeed), at most 3
     times), within the envelope's speed range, so that the airspeed closes on the wanted speed
-    in about 2 s. Logged when first learned and when tau moves by 20 %.
+    in about 2 s. Logged when first learned and when tau moves by 20 %. Opt-in
+    (``learn_speed_lag`` is False by default): on real 4.6.2 it showed no gain in two runs and
+    the learned lag drifted upward (docs/vehicle-link.md).
     The altitude command's param3 is 0: ArduPlane 4.6's GUIDED altitude slew
     (``ModeGuided::update_target_altitude``) gives TECS the *current* altitude moved toward
     the command by param3 x 0.1 s every 0.1 s, so at 3 m/s TECS saw 0.3 m of error and the
@@ -202,7 +204,7 @@ class ArduPlaneAdapter:
     learn_turn_efficiency: bool = True
     turn_efficiency_params: TurnEfficiencyParams = field(default_factory=TurnEfficiencyParams)
     efficiency_report_change: float = 0.1
-    learn_speed_lag: bool = True
+    learn_speed_lag: bool = False
     #: told (t_s, tau_s, samples) whenever the speed lag is logged
     on_speed_lag_learned: Callable[[float, float, int], None] | None = None
     speed_lag_params: SpeedLagParams = field(default_factory=SpeedLagParams)

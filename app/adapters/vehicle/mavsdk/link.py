@@ -94,7 +94,7 @@ class LinkConfig:
     ``arduplane_turn_learning``: on ArduPlane, size the turn limit and the heading command on
     the turn efficiency learned in flight (``ArduPlaneAdapter.learn_turn_efficiency``);
     ``arduplane_speed_learning``: lead its speed commands through the airspeed's learned lag
-    (``learn_speed_lag``).
+    (``learn_speed_lag``; off by default).
     ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
@@ -118,7 +118,7 @@ class LinkConfig:
     arduplane_gcs_failsafe: bool = True
     arduplane_airspeed_check: bool = True
     arduplane_turn_learning: bool = True
-    arduplane_speed_learning: bool = True
+    arduplane_speed_learning: bool = False
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
