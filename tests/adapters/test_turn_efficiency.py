@@ -107,6 +107,39 @@ def test_a_telemetry_gap_is_not_spanned():
     assert fit(before + after).efficiency == pytest.approx(0.7, rel=0.02)
 
 
+def hunting(seconds: float, *, steady: float, changing: float, seed: int = 0):
+    """Frames of ArduPlane 4.6.2's GUIDED turns as its tlogs showed them: banks held for a few
+    seconds, and episodes where the bank hunts +-6.5 deg about its demand with a 1.5 s period.
+    The course turns at ``steady`` of the coordinated rate at a held bank and, as read over the
+    real episodes' intervals, at ``changing`` of it while the bank moves."""
+    rng = np.random.default_rng(seed)
+    course, frames, t, dt = 0.0, [], 0.0, 0.1
+    while t < seconds:
+        bank = math.radians(rng.uniform(10.0, 30.0)) * rng.choice([-1.0, 1.0])
+        for _ in range(40):  # 4 s held
+            frames.append((t, course, bank, 14.0))
+            course += steady * GRAVITY_M_S2 * math.tan(bank) / 14.0 * dt
+            t += dt
+        for k in range(60):  # 6 s hunting
+            roll = bank + math.radians(6.5) * math.sin(2.0 * math.pi * k * dt / 1.5)
+            frames.append((t, course, roll, 14.0))
+            course += changing * GRAVITY_M_S2 * math.tan(roll) / 14.0 * dt
+            t += dt
+    return frames
+
+
+def test_the_intervals_where_the_bank_hunts_are_left_out():
+    frames = hunting(300.0, steady=0.70, changing=0.86)
+    turn = fit(frames)
+    assert turn.ready
+    assert turn.unsteady > turn.samples / 2
+    assert turn.efficiency == pytest.approx(0.70, abs=0.01)
+    # counting every interval reads what real ArduPlane's fit read, 0.75 or more
+    everything = fit(frames, TurnEfficiencyParams(max_roll_rate_rad_s=100.0))
+    assert everything.unsteady == 0
+    assert everything.efficiency > 0.75
+
+
 def test_old_turns_are_forgotten():
     params = TurnEfficiencyParams(memory_s=60.0)
     first = turning(1.0, 120.0)

@@ -126,11 +126,12 @@ class ArduPlaneAdapter:
     bank limit held it to 0.14 rad/s for an envelope of 0.2 and the aircraft orbited 40-70 m
     outside a 90 m circle. With ``learn_turn_efficiency`` every frame the adapter sends on
     (GUIDED only) goes to a ``TurnEfficiency`` fit (course rate against g tan(bank) / v, the
-    bank from ATTITUDE); once it is ready the acceleration limit is v * max course rate / eta
-    and the linearised command banks atan(k e v / (eta g)), so the envelope's course rate is
-    what is flown. The fit is logged when it is first ready and whenever eta moves by more
-    than ``efficiency_report_change`` (10 %). eta is at least 0.4 (``TurnEfficiencyParams``), and
-    ArduPlane itself caps the bank at ROLL_LIMIT_DEG.
+    bank from ATTITUDE, over intervals of steady bank only: real ArduPlane's bank hunts, and
+    the intervals where it changes read high); once it is ready the acceleration limit is
+    v * max course rate / eta and the linearised command banks atan(k e v / (eta g)), so the
+    envelope's course rate is what is flown. The fit is logged when it is first ready and
+    whenever eta moves by more than ``efficiency_report_change`` (10 %). eta is at least 0.4
+    (``TurnEfficiencyParams``), and ArduPlane itself caps the bank at ROLL_LIMIT_DEG.
 
     **Speed lag.** Real 4.6.2's airspeed followed GUIDED_CHANGE_SPEED about 3 s late (TECS).
     With ``learn_speed_lag`` every frame goes to a ``SpeedLag`` fit (the airspeed's change
@@ -293,12 +294,14 @@ class ArduPlaneAdapter:
             return
         self._efficiency_reported = eta
         log.info(
-            "vehicle %d: turns at %.2f of the coordinated rate for its bank (%d samples, "
-            "%.0f s turning): bank limit and heading command sized for it",
+            "vehicle %d: turns at %.2f of the coordinated rate for its bank (%d samples at a "
+            "steady bank, %.0f s turning; %d left out while the bank changed): bank limit and "
+            "heading command sized for it",
             self.vehicle_id,
             eta,
             self._turn.samples,
             self._turn.turning_s,
+            self._turn.unsteady,
         )
         if self.on_turn_learned is not None:
             self.on_turn_learned(state.t_s, eta, self._turn.samples, self._turn.turning_s)
