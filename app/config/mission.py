@@ -216,7 +216,11 @@ class SimSettings(StrictModel):
     ``arduplane_guided_heading``, ``arduplane_turn_efficiency`` (the airframe's course rate at a
     bank as a fraction of the coordinated turn's: 0.70, as real ArduPlane 4.6.2 SITL),
     ``arduplane_speed_time_constant_s`` (TECS's lag behind a GUIDED speed: 4 s),
-    ``arduplane_gcs_seen_at_boot`` and ``arduplane_guided_rebase``."""
+    ``arduplane_gcs_seen_at_boot`` and ``arduplane_guided_rebase``. ``start``: where the team
+    takes off: ``standby`` (bunched on the standby circle, the default) or ``home`` (a row of
+    homes ``home_spacing_m`` apart going east from the origin, facing north, as three SITL
+    instances started with their homes 60 m apart), so that the simulator flies a SITL mission
+    file from where the real autopilots start."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
     speedup: Speedup = 3.0
@@ -237,6 +241,8 @@ class SimSettings(StrictModel):
     arduplane_speed_time_constant_s: NonNegative = 4.0
     arduplane_gcs_seen_at_boot: bool = True
     arduplane_guided_rebase: bool = True
+    start: Literal["standby", "home"] = "standby"
+    home_spacing_m: Positive = 60.0
 
 
 class BusLoginConfig(StrictModel):

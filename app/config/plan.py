@@ -135,9 +135,16 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
 
 
 def team_starts(plan: MissionPlan) -> list[FixedWingState]:
-    """The team at launch: bunched on the standby circle, ``LAUNCH_SPACING_RAD`` apart, each
-    flying along the circle in the orbit's direction at cruise speed."""
+    """The team at launch. ``[sim] start = "standby"``: bunched on the standby circle,
+    ``LAUNCH_SPACING_RAD`` apart, each flying along the circle in the orbit's direction at
+    cruise speed; ``"home"``: in a row ``home_spacing_m`` apart going east from the origin,
+    facing north."""
     cfg = plan.config
+    if cfg.sim.start == "home":
+        return [
+            FixedWingState(i * cfg.sim.home_spacing_m, 0.0, 0.0, cfg.limits.cruise_speed_m_s)
+            for i in range(plan.count)
+        ]
     sign = 1.0 if cfg.orbit == "ccw" else -1.0
     out = []
     for i in range(plan.count):
@@ -155,7 +162,7 @@ def team_starts(plan: MissionPlan) -> list[FixedWingState]:
 
 
 def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
-    """The built-in simulator for a plan: the team launched bunched on the standby circle."""
+    """The built-in simulator for a plan: the team launched where ``team_starts`` puts it."""
     cfg = plan.config
     vehicles = tuple(
         VehicleConfig(

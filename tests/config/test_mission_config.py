@@ -55,6 +55,20 @@ def test_the_simulator_launches_the_team_on_the_standby_circle():
     assert sim.target is plan.target
 
 
+def test_the_team_can_start_from_homes_near_the_origin_as_sitl_instances_do():
+    raw = load_config("ardupilot-sitl", MissionConfig).model_dump()
+    raw["sim"] |= {"start": "home", "home_spacing_m": 50.0}
+    sim = sim_config(build_plan(MissionConfig.model_validate(raw)), base_port=30000)
+    assert [(v.start.east_m, v.start.north_m, v.start.course_rad) for v in sim.vehicles] == [
+        (0.0, 0.0, 0.0),
+        (50.0, 0.0, 0.0),
+        (100.0, 0.0, 0.0),
+    ]
+    raw["sim"]["start"] = "runway"
+    with pytest.raises(ValidationError, match="start"):
+        MissionConfig.model_validate(raw)
+
+
 PERSONALITY = (
     "boot_spacing_s",
     "takeoff",
