@@ -271,9 +271,15 @@ def vehicle_agent(
             altitude_m=cfg.link.vehicle_altitude_m(vehicle),
             clock_rate=clock_rate(plan, builtin),
             phase_actuator=plan.phase_actuator,
+            control_period_s=control_period_s(cfg.link.control_rate_hz),
         ),
         recorder=recorder,
     )
+
+
+def control_period_s(rate_hz: float) -> float:
+    """The agents' control period for ``[link] control_rate_hz`` (0: every frame)."""
+    return 1.0 / rate_hz if rate_hz > 0.0 else 0.0
 
 
 def counters_of(thing: object) -> dict[str, Any] | None:

@@ -173,6 +173,10 @@ class LinkSettings(StrictModel):
     command and lead the command through it (opt-in: in the simulator it helped, on real
     ArduPlane 4.6.2 two runs showed no gain and the learned lag drifted from 4 to 7-8 s;
     docs/vehicle-link.md); false (default): send the speed wanted.
+    ``control_rate_hz``: each agent steers at most this often (vehicle time); telemetry
+    arriving faster (PX4 streams position at 50 Hz) is coalesced, the frames between counted
+    as ``frames_coalesced``, so an agent's CPU is that of the control rate. 0: steer on every
+    frame.
     """
 
     connect: list[str] = Field(default_factory=list)
@@ -190,6 +194,7 @@ class LinkSettings(StrictModel):
     camera_component_id: Annotated[int, Field(ge=2, le=255)] = 100  # MAV_COMP_ID_CAMERA
     arduplane_turn_learning: bool = True
     arduplane_speed_learning: bool = False
+    control_rate_hz: NonNegative = 10.0
 
     @field_validator("gcs_forward")
     @classmethod

@@ -80,7 +80,12 @@ class AgentRuntimeParams:
     ``max_fix_rate_hz``, ``fix_burst``: the camera's fixes taken from the link, at most this
     rate (by their vehicle time) after a burst of this many; the rest are dropped, counted
     (``fixes_rate_limited``): a burst of forged fixes into the vehicle's MAVLink port costs the
-    filter a handful of gated updates, not a lost track."""
+    filter a handful of gated updates, not a lost track.
+    ``control_period_s``: the agent steers at most once per this much vehicle time, on a grid
+    of it (a frame up to 30 % of a period early takes its slot); telemetry faster than that
+    (PX4's 50 Hz) is coalesced: the frames between are not steered on, only counted
+    (``frames_coalesced``), so the work per vehicle is that of the control rate whatever the
+    telemetry rate. 0: steer on every frame."""
 
     altitude_m: float | None = None
     status_period_s: float = 0.1
@@ -93,6 +98,17 @@ class AgentRuntimeParams:
     phase_actuator: ActuatorChoice | None = None
     max_fix_rate_hz: float = 20.0
     fix_burst: int = 20
+    control_period_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.control_period_s) and self.control_period_s >= 0.0):
+            raise ValueError(
+                f"control_period_s must be finite and >= 0, got {self.control_period_s!r}"
+            )
+
+
+#: a frame this share of the control period early still takes its slot (telemetry jitter)
+CONTROL_SLOT_EARLY = 0.3
 
 
 @dataclass
@@ -106,6 +122,8 @@ class AgentCounters:
     observations_dropped: int = 0
     observations_merged: int = 0  # queued observations folded into another (merge_backlog)
     frames_skipped: int = 0  # telemetry frames that queued while a tick ran, steered past
+    #: frames that came faster than the control period: not steered on (not a sign of load)
+    frames_coalesced: int = 0
     frame_wait_max_s: float = 0.0  # longest a steered frame waited for its tick (vehicle s)
     frame_wait_sum_s: float = 0.0  # summed over the ticks (mean: / ticks)
     messages_refused: int = 0  # bus messages not believed (stamped ahead, a fused estimate off)
@@ -217,6 +235,7 @@ class VehicleAgent:
         self._recorder = recorder  # what the local filter is fed, for ``standoff replay``
         self._pilot_mode: str | None = None  # the mode someone else put the vehicle in
         self._last_t = 0.0
+        self._next_slot_t = -math.inf  # the control period's next slot (vehicle time)
         self._load = _LoadWindow()
         self._fixes = _FixBucket(runtime.max_fix_rate_hz, runtime.fix_burst)
         self._faults: dict[str, int] = {}
@@ -299,6 +318,16 @@ class VehicleAgent:
         newest = self._link.latest
         frame = newest if newest is not None and newest.t_s > queued.t_s else queued
         t = frame.t_s
+        period = self._runtime.control_period_s
+        if period > 0.0 and self.counters.ticks > 0 and self._last_t < t:
+            if t < self._next_slot_t - CONTROL_SLOT_EARLY * period:
+                self.counters.frames_coalesced += 1
+                return
+            # the next slot on the grid; after a gap (or a clock jump) the grid restarts here
+            slot = self._next_slot_t + period
+            self._next_slot_t = slot if abs(t - self._next_slot_t) < period else t + period
+        elif self.counters.ticks == 0:
+            self._next_slot_t = t + period
         self._load.frames += 1
         if t <= self._last_t and self.counters.ticks > 0:
             # another message of the same instant, or one the last tick already skipped

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
+import random
 
 import pytest
 
@@ -107,3 +109,54 @@ async def test_how_long_frames_waited_is_counted_in_vehicle_seconds() -> None:
     assert c.ticks > 10
     assert c.frame_wait_max_s == pytest.approx(0.06)
     assert c.frame_wait_sum_s == pytest.approx(0.06 * c.ticks)
+
+
+async def fly_stream(
+    rate_hz: float, seconds: float, runtime: AgentRuntimeParams, jitter_s: float = 0.0
+) -> tuple[VehicleAgent, Events, BurstyLink]:
+    """One frame at a time at ``rate_hz`` (each stamped up to ``jitter_s`` off its slot), the
+    agent given the time to steer on each."""
+    plan = build_plan(load_config("hil", MissionConfig))
+    link = BurstyLink()
+    events = Events()
+    rng = random.Random(1)
+    async with (
+        InProcessBus(InProcessBroker(), client_id="agent-1") as bus,
+        asyncio.TaskGroup() as tg,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, bus, events, runtime)
+        running = tg.create_task(agent.run())
+        for k in range(round(seconds * rate_hz)):
+            t = k / rate_hz + rng.uniform(-jitter_s, jitter_s)
+            link.put(frame(t, -1000.0 + 14.0 * t, 150.0))
+            await asyncio.sleep(0.001)
+        running.cancel()
+    return agent, events, link
+
+
+async def test_telemetry_faster_than_the_control_rate_is_coalesced_not_taken_for_load() -> None:
+    # PX4 streams position at 50 Hz; the agents steer at 10 Hz on the newest frame
+    agent, events, link = await fly_stream(50.0, 40.0, AgentRuntimeParams(control_period_s=0.1))
+    c = agent.counters
+    assert 395 <= c.ticks <= 401  # one a control period
+    assert c.frames_coalesced == 2000 - c.ticks
+    assert c.frames_skipped == 0
+    assert link.sent == c.ticks
+    assert not [kind for kind, _ in events.seen if kind == "falling_behind"]
+    # with no control period every frame is steered on
+    every, _, _ = await fly_stream(50.0, 10.0, AgentRuntimeParams())
+    assert every.counters.ticks == 500
+    assert every.counters.frames_coalesced == 0
+
+
+async def test_telemetry_at_the_control_rate_is_steered_on_every_frame_despite_jitter() -> None:
+    runtime = AgentRuntimeParams(control_period_s=0.1)
+    agent, _, _ = await fly_stream(10.0, 30.0, runtime, jitter_s=0.02)
+    assert (agent.counters.ticks, agent.counters.frames_coalesced) == (300, 0)
+    slow, _, _ = await fly_stream(5.0, 30.0, runtime)
+    assert (slow.counters.ticks, slow.counters.frames_coalesced) == (150, 0)
+
+
+def test_a_bad_control_period_is_refused() -> None:
+    with pytest.raises(ValueError, match="control_period_s"):
+        AgentRuntimeParams(control_period_s=math.nan)
