@@ -222,7 +222,10 @@ class SimConfig:
 
     Personalities (``sitl.px4``, ``sitl.arduplane`` document each against the autopilot's
     source): ``takeoff``; ``px4_offboard_speed``, ``px4_trim_airspeed_m_s`` (FW_AIRSPD_TRIM;
-    None: each vehicle's cruise speed) and ``px4_curvature_sign``; ``arduplane_stream_rate_hz``
+    None: each vehicle's cruise speed), ``px4_curvature_sign`` and ``px4_roll_limit_deg``
+    (FW_R_LIM, 50 deg: an offboard position setpoint is followed turning at up to
+    g tan(FW_R_LIM) / V, not the vehicle's envelope rate; None: the envelope's);
+    ``arduplane_stream_rate_hz``
     (the SRn_* stream rates, 1 Hz as shipped), ``arduplane_guided_heading``,
     ``arduplane_turn_efficiency`` (the course rate flown at a bank, as a fraction of the
     coordinated turn's g tan(bank) / V: 0.70 in real ArduPlane 4.6.2 SITL),
@@ -262,6 +265,7 @@ class SimConfig:
     px4_offboard_speed: Px4OffboardSpeed = "trim"
     px4_trim_airspeed_m_s: float | None = None
     px4_curvature_sign: Px4CurvatureSign = "v1.16.0"
+    px4_roll_limit_deg: float | None = 50.0
     arduplane_stream_rate_hz: float = 1.0
     arduplane_guided_heading: GuidedHeadingLoop = "pid"
     arduplane_turn_efficiency: float = 0.70
@@ -324,6 +328,9 @@ class SimConfig:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
         if self.px4_trim_airspeed_m_s is not None:
             _positive("px4_trim_airspeed_m_s", self.px4_trim_airspeed_m_s)
+        roll = self.px4_roll_limit_deg
+        if roll is not None and not (math.isfinite(roll) and 0.0 < roll < 90.0):
+            raise ValueError(f"px4_roll_limit_deg must be in (0, 90) or None, got {roll!r}")
         _non_negative("arduplane_stream_rate_hz", self.arduplane_stream_rate_hz)
         _non_negative("arduplane_speed_time_constant_s", self.arduplane_speed_time_constant_s)
         eta = self.arduplane_turn_efficiency

@@ -27,6 +27,14 @@ whose default is the real behaviour):
   -sign(v x a_n) (x north, y east), so a clockwise-turning acceleration feeds a counter-clockwise
   curvature forward (``px4_curvature_sign = "v1.16.0"``; PX4 fixed the sign after the release,
   PR #27582: ``"ned"``).
+- Turn rate in OFFBOARD (``px4_roll_limit_deg``, FW_R_LIM, 50 deg: fw_path_navigation_params.c;
+  airframe 10041 keeps it): NPFG follows a position setpoint's line banking up to FW_R_LIM, so
+  it turns at up to g tan(FW_R_LIM) / V (0.78 rad/s at 15 m/s), whatever envelope the mission
+  assumes. Real v1.16.0 SIH x3 flying `px4-sitl` turned at over 0.2 rad/s (the mission's
+  envelope) 36 % of the track stage (0.5 s intervals), up to 0.39 rad/s at 27 deg of bank, and
+  held the moving target's circle at 10-14 m RMS where this simulator, held to 0.2, gave
+  14-35 m. Velocity-only setpoints (this simulator's own extension) and the other modes keep
+  the envelope's rate. None: the envelope's rate everywhere.
 - Take-off (``takeoff = "runway"``, airframe 10041 sets RWTO_TKOFF 1): arming leaves it on the
   ground; MAV_CMD_NAV_TAKEOFF (or the take-off mode) while armed starts the ground roll; the land
   detector reports "in air" during the roll (see ``sitl.vehicle``); take-off ends in hold once
@@ -67,6 +75,9 @@ from sitl.vehicle import (
 )
 
 log = logging.getLogger(__name__)
+
+#: standard gravity (m/s^2)
+GRAVITY_M_S2: Final = 9.80665
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +148,10 @@ class Px4Autopilot:
         self.trim_airspeed_m_s = trim_airspeed_m_s
         self._offboard_speed = sim.px4_offboard_speed
         self._curvature_sign = -1.0 if sim.px4_curvature_sign == "v1.16.0" else 1.0
+        roll = sim.px4_roll_limit_deg
+        self._max_lateral_accel_m_s2 = (
+            None if roll is None else GRAVITY_M_S2 * math.tan(math.radians(roll))
+        )
         self._runway = sim.takeoff == "runway"
         self.offboard_timeout_s = sim.offboard_timeout_s
         self.failsafe_action = sim.failsafe_action
@@ -212,6 +227,12 @@ class Px4Autopilot:
             v.command = self._offboard_command(self.offboard_setpoint)
         limits = v.config.limits
         course_cmd, speed_cmd = guide(v.state, v.command or v.hold_here(), limits.course_gain_per_s)
+        accel = self._max_lateral_accel_m_s2
+        if accel is not None and v.mode is OFFBOARD and isinstance(v.command, LineCommand):
+            # NPFG banks up to FW_R_LIM on a position setpoint's line
+            speed = max(v.state.speed_m_s, limits.min_speed_m_s)
+            rate = max(limits.max_course_rate_rad_s, accel / speed)
+            limits = replace(limits, max_course_rate_rad_s=rate)
         heading_cmd = heading_for_ground_course(
             course_cmd, v.state.speed_m_s, v.wind_east_m_s, v.wind_north_m_s
         )

@@ -217,7 +217,8 @@ class SimSettings(StrictModel):
     4.6; docs/simulator.md). The personality's behaviours are the ``sitl.config.SimConfig``
     fields of the same names, each defaulting to what the real autopilot does (docs/simulator.md
     has the table): ``boot_spacing_s``, ``takeoff``, ``px4_offboard_speed``,
-    ``px4_trim_airspeed_m_s``, ``px4_curvature_sign``, ``arduplane_stream_rate_hz``,
+    ``px4_trim_airspeed_m_s``, ``px4_curvature_sign``, ``px4_roll_limit_deg`` (FW_R_LIM: the bank
+    PX4 follows an offboard line with), ``arduplane_stream_rate_hz``,
     ``arduplane_guided_heading``, ``arduplane_turn_efficiency`` (the airframe's course rate at a
     bank as a fraction of the coordinated turn's: 0.70, as real ArduPlane 4.6.2 SITL),
     ``arduplane_speed_time_constant_s`` (TECS's lag behind a GUIDED speed: 4 s),
@@ -240,6 +241,7 @@ class SimSettings(StrictModel):
     px4_offboard_speed: Literal["trim", "setpoint"] = "trim"
     px4_trim_airspeed_m_s: Positive | None = None
     px4_curvature_sign: Literal["v1.16.0", "ned"] = "v1.16.0"
+    px4_roll_limit_deg: Annotated[float, Field(gt=0.0, lt=90.0)] | None = 50.0
     arduplane_stream_rate_hz: NonNegative = 1.0
     arduplane_guided_heading: Literal["pid", "ideal"] = "pid"
     arduplane_turn_efficiency: Annotated[float, Field(gt=0.0, le=1.0)] = 0.70

@@ -194,6 +194,7 @@ def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
             px4_offboard_speed=cfg.sim.px4_offboard_speed,
             px4_trim_airspeed_m_s=cfg.sim.px4_trim_airspeed_m_s,
             px4_curvature_sign=cfg.sim.px4_curvature_sign,
+            px4_roll_limit_deg=cfg.sim.px4_roll_limit_deg,
             arduplane_stream_rate_hz=cfg.sim.arduplane_stream_rate_hz,
             arduplane_guided_heading=cfg.sim.arduplane_guided_heading,
             arduplane_turn_efficiency=cfg.sim.arduplane_turn_efficiency,

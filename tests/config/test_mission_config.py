@@ -75,6 +75,7 @@ PERSONALITY = (
     "px4_offboard_speed",
     "px4_trim_airspeed_m_s",
     "px4_curvature_sign",
+    "px4_roll_limit_deg",
     "arduplane_stream_rate_hz",
     "arduplane_guided_heading",
     "arduplane_turn_efficiency",
@@ -100,6 +101,7 @@ def test_every_personality_option_is_a_sim_key():
         "px4_offboard_speed": "setpoint",
         "px4_trim_airspeed_m_s": 16.0,
         "px4_curvature_sign": "ned",
+        "px4_roll_limit_deg": None,
         "arduplane_stream_rate_hz": 4.0,
         "arduplane_guided_heading": "ideal",
         "arduplane_turn_efficiency": 0.9,
@@ -122,6 +124,7 @@ def test_every_personality_option_is_a_sim_key():
         ("arduplane_turn_efficiency", 0.0),
         ("boot_spacing_s", -1.0),
         ("px4_offboard_speed", "fast"),
+        ("px4_roll_limit_deg", 90.0),
     ],
 )
 def test_a_bad_personality_key_is_refused_by_name(key, value):

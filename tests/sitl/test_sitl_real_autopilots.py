@@ -96,6 +96,36 @@ async def test_px4_acceleration_normal_to_the_velocity_is_fed_forward_as_curvatu
         assert start.north_m < sim.vehicles[0].state.north_m
 
 
+@pytest.mark.parametrize("roll_limit_deg", [50.0, None])
+async def test_px4_follows_an_offboard_line_banking_up_to_fw_r_lim(roll_limit_deg):
+    # a 40 m radius at 18 m/s is 0.45 rad/s, 40 deg of bank: within FW_R_LIM, beyond the envelope
+    config = sim_config(
+        1,
+        speedup=1.0,
+        takeoff="launch",
+        px4_curvature_sign="ned",
+        px4_roll_limit_deg=roll_limit_deg,
+    )
+    envelope_rate = config.vehicles[0].limits.max_course_rate_rad_s
+    assert envelope_rate < 0.3
+    async with running_sim(config) as sim, RawClient(sim.endpoints[0].gcs_port) as client:
+
+        def send() -> None:
+            s = sim.vehicles[0].state
+            c, n = math.cos(s.course_rad), math.sin(s.course_rad)
+            a = 18.0**2 / 40.0
+            an, ae = -a * n, a * c
+            _setpoint(client, s.north_m, s.east_m, 18.0 * c, 18.0 * n, an, ae, mask=POS_VEL_ACCEL)
+
+        await _offboard(sim, client, send)
+        await _stream(sim, sim.time_s + 2.0, send)
+        rate = abs(sim.truth().vehicles[0].state.course_rate_rad_s)
+        if roll_limit_deg is None:
+            assert rate == pytest.approx(envelope_rate, rel=0.02)
+        else:
+            assert rate == pytest.approx(18.0 / 40.0, rel=0.1)
+
+
 async def test_px4_reports_in_air_during_the_ground_roll():
     config = sim_config(1, speedup=SPEEDUP)  # runway take-off (the default)
     async with running_sim(config) as sim, RawClient(sim.endpoints[0].gcs_port) as client:
