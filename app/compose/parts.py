@@ -85,6 +85,7 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         camera_component_id=cfg.link.camera_component_id,
         arduplane_turn_learning=cfg.link.arduplane_turn_learning,
         arduplane_speed_learning=cfg.link.arduplane_speed_learning,
+        px4_airspeed_via_trim=cfg.link.px4_airspeed_via_trim,
     )
 
 

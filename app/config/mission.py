@@ -173,6 +173,11 @@ class LinkSettings(StrictModel):
     command and lead the command through it (opt-in: in the simulator it helped, on real
     ArduPlane 4.6.2 two runs showed no gain and the learned lag drifted from 4 to 7-8 s;
     docs/vehicle-link.md); false (default): send the speed wanted.
+    ``px4_airspeed_via_trim``: on PX4 (which flies no commanded speed in OFFBOARD), fly the
+    phase law's airspeed by writing FW_AIRSPD_TRIM: the vehicle then honours speed and the
+    ``auto`` phase actuator is ``speed``. Off by default: every change is a parameter write
+    (at most one per 5 s, 0.5 m/s deadband), the trim is restored at the end, and an operator
+    must accept PX4's cruise airspeed being moved (docs/vehicle-link.md).
     ``control_rate_hz``: each agent steers at most this often (vehicle time); telemetry
     arriving faster (PX4 streams position at 50 Hz) is coalesced, the frames between counted
     as ``frames_coalesced``, so an agent's CPU is that of the control rate. 0: steer on every
@@ -194,6 +199,7 @@ class LinkSettings(StrictModel):
     camera_component_id: Annotated[int, Field(ge=2, le=255)] = 100  # MAV_COMP_ID_CAMERA
     arduplane_turn_learning: bool = True
     arduplane_speed_learning: bool = False
+    px4_airspeed_via_trim: bool = False
     control_rate_hz: NonNegative = 10.0
 
     @field_validator("gcs_forward")

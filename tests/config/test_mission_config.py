@@ -184,3 +184,15 @@ def test_the_ground_fuses_and_allocates_at_the_missions_periods():
     )
     ground = build_plan(patched).ground
     assert (ground.fuse_period_s, ground.feedback_period_s) == (0.5, 2.5)
+
+
+def test_steering_px4s_airspeed_through_its_trim_is_opt_in_and_reaches_the_link():
+    from app.compose.parts import link_config
+
+    raw = load_config("px4-sitl", MissionConfig).model_dump()
+    assert not link_config(
+        build_plan(MissionConfig.model_validate(raw)), False
+    ).px4_airspeed_via_trim
+    raw["link"]["px4_airspeed_via_trim"] = True
+    config = link_config(build_plan(MissionConfig.model_validate(raw)), False)
+    assert config.px4_airspeed_via_trim

@@ -95,6 +95,9 @@ class LinkConfig:
     the turn efficiency learned in flight (``ArduPlaneAdapter.learn_turn_efficiency``);
     ``arduplane_speed_learning``: lead its speed commands through the airspeed's learned lag
     (``learn_speed_lag``; off by default).
+    ``px4_airspeed_via_trim``: on PX4, fly the commanded airspeed by writing FW_AIRSPD_TRIM
+    (``Px4FixedWingAdapter.airspeed_via_trim_param``; off by default: a parameter write per
+    change, at most one per 5 s).
     ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
@@ -119,6 +122,7 @@ class LinkConfig:
     arduplane_airspeed_check: bool = True
     arduplane_turn_learning: bool = True
     arduplane_speed_learning: bool = False
+    px4_airspeed_via_trim: bool = False
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -384,6 +388,7 @@ class MavsdkVehicleLink:
                 limits=limits,
                 target_component=self._config.autopilot_component_id,
                 offboard_loss_action=self._config.px4_offboard_loss_action,
+                airspeed_via_trim_param=self._config.px4_airspeed_via_trim,
             )
         if name == "arduplane":
             return ArduPlaneAdapter(
