@@ -51,7 +51,12 @@ class MissionGuidanceConfig(GuidanceConfig):
     (gather, adjust) command the airspeed that flies the guidance's ground speed in it, and in
     the track stage fly the guidance in the air mass (``estimate``), or the airspeed conversion
     in every stage (``airspeed``), or command the ground speed as the airspeed (``off``, the
-    paper's still-air assumption); ``app.core.guidance.wind``, docs/guidance.md "Wind"."""
+    paper's still-air assumption); ``app.core.guidance.wind``, docs/guidance.md "Wind".
+    ``track_planner``: in the track stage fly the field (``field``) or plan the team's course
+    rates and speeds ``track_horizon_s`` ahead on the target estimate and fly the plan
+    (``horizon``, receding horizon, replanned every ``track_replan_s``; speed-honouring
+    autopilots only: a vehicle whose phase actuator is the orbit radius keeps the field);
+    ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon"."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
@@ -60,6 +65,9 @@ class MissionGuidanceConfig(GuidanceConfig):
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
     course_loop_identification: Literal["fly", "report", "off"] = "fly"
     wind: Literal["estimate", "airspeed", "off"] = "estimate"
+    track_planner: Literal["field", "horizon"] = "field"
+    track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=2.0)] = 40.0
+    track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 2.0
 
 
 class MissionPhaseConfig(PhaseConfig):

@@ -14,6 +14,7 @@ from app.config.estimator import load_estimator
 from app.config.mission import MissionConfig
 from app.core.agent import ActuatorChoice, AgentParams, GuidanceParams, PhaseParams
 from app.core.guidance import course_id
+from app.core.guidance.horizon import HorizonParams
 from app.core.guidance.wind import WindParams
 from app.core.mission.agent import MissionAgentParams
 from app.core.mission.ground import GroundParams
@@ -77,6 +78,8 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             inverse_field=False,
             orbit_plan=g.track_orbit_plan,
             speed_cap=g.track_speed_cap,
+            planner=g.track_planner,
+            horizon=HorizonParams(horizon_s=g.track_horizon_s, replan_s=g.track_replan_s),
         )
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
         estimator = load_estimator(config.estimator.config)

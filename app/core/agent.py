@@ -13,8 +13,11 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Literal
 
+import numpy as np
+
 from app.core import phase, plant
 from app.core.frames import wrap_pi
+from app.core.guidance import horizon as hz
 from app.core.guidance.course import (
     CourseLoop,
     course_command,
@@ -37,6 +40,7 @@ PhaseLaw = Literal["paper", "frew", "none"]
 Orbit = Literal["ccw", "cw"]
 FieldMode = Literal["field", "inverse"]
 OrbitPlan = Literal["circle", "ellipse"]
+Planner = Literal["field", "horizon"]
 PhaseActuator = Literal["speed", "radius"]
 #: what the radius actuator keeps spaced around a moving target (``PhaseParams.radius_phase``)
 RadiusPhase = Literal["orbit_time", "polar"]
@@ -66,6 +70,10 @@ class GuidanceParams:
     course-rate limit at the speed the phase law wants (``orbit_plan.orbit_speed_cap``: flying
     against the target's motion, e.g. at most 11.2 m/s on the 90 m circle around a 3 m/s
     target), braking ahead of such a place at ``speed_cap_brake`` of the envelope's acceleration.
+    ``planner`` (improvement, issue #15 item 4): ``field`` flies the field as above;
+    ``horizon`` plans the ground course rate and speed over the next ``horizon.horizon_s`` on
+    the target estimate and the team's seats (``guidance.horizon``), every
+    ``horizon.replan_s``, and flies the plan's start (the field's command stays the fallback).
     """
 
     radius_m: float
@@ -86,6 +94,8 @@ class GuidanceParams:
     speed_cap: bool = False
     speed_cap_margin: float = 0.95
     speed_cap_brake: float = 0.7
+    planner: Planner = "field"
+    horizon: hz.HorizonParams = field(default_factory=hz.HorizonParams)
     #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
     orbit_sign: int = field(init=False, repr=False)
     #: whether the ILVF switch is used (derived from ``law`` and ``inverse_field``)
@@ -109,6 +119,10 @@ class GuidanceParams:
         if not (math.isfinite(self.curvature_margin) and 0.0 < self.curvature_margin <= 1.0):
             raise ValueError(
                 f"GuidanceParams.curvature_margin must be in (0, 1], got {self.curvature_margin!r}"
+            )
+        if self.planner not in ("field", "horizon"):
+            raise ValueError(
+                f"GuidanceParams.planner must be 'field' or 'horizon', got {self.planner!r}"
             )
         if self.orbit_plan not in ("circle", "ellipse"):
             raise ValueError(
@@ -278,6 +292,9 @@ class AgentInputs:
     own: OwnTelemetry
     target: TargetInfo
     team_positions: tuple[tuple[float, float], ...] = ()
+    #: ``team_motion[j]``: vehicle j's (course rad, ground speed m/s) where known (the joint
+    #: receding-horizon plan's input, ``GuidanceParams.planner``); empty: not known
+    team_motion: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -301,6 +318,10 @@ class AgentState:
     c_radius_m: float = 0.0
     radius_m: float = 0.0
     radius_t_s: float = -math.inf
+    #: the receding-horizon planner's plan (``GuidanceParams.planner``; None: not yet): the
+    #: vehicle's own, and the team's it is part of (a joint plan; None: planned alone)
+    plan: hz.Plan | None = None
+    team_plan: hz.TeamPlan | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -707,7 +728,197 @@ def agent_step(
         actuator=params.phase.actuator,
         radius_m=radius,
     )
+    if g.planner == "horizon":
+        new_state, command, planned = _horizon_command(new_state, inputs, params, command)
+        events = (*events, *planned)
     return new_state, command, events
+
+
+def _seat_path(inputs: AgentInputs, params: AgentParams, velocity: hz.Array) -> hz.Array | None:
+    """The vehicle's seat over the plan (``horizon.seat_path``: the teammates predicted round
+    the circle at cruise speed); None without phase keeping."""
+    env, ph, g = params.envelope, params.phase, params.guidance
+    team = inputs.team_positions
+    if ph.law == "none" or len(team) < 2:
+        return None
+    if not 0 <= params.index < len(team):
+        raise ValueError(f"vehicle index {params.index} outside a team of {len(team)}")
+    tx, ty, sign = inputs.target.east_m, inputs.target.north_m, g.orbit_sign
+    own = sign * math.atan2(inputs.own.north_m - ty, inputs.own.east_m - tx)
+    others = [
+        sign * math.atan2(n - ty, e - tx) for j, (e, n) in enumerate(team) if j != params.index
+    ]
+    return hz.seat_path(
+        own,
+        np.array(others),
+        velocity,
+        g.radius_m,
+        sign,
+        env.cruise_speed_m_s,
+        g.horizon.step_s,
+    )
+
+
+def _field_guess(problem: hz.TeamProblem, params: AgentParams, velocity: hz.Array) -> hz.Array:
+    """The field's own controls over the horizon, per block (2, blocks, n): every vehicle of
+    ``problem`` flown on the track stage's field (without phase keeping, at cruise speed)
+    around the predicted target, its course rate that of eq. (2) under the lag-compensated
+    command. The joint plan's starting point."""
+    g, env = params.guidance, params.envelope
+    hp = g.horizon
+    nb, per, dt = hp.blocks, hp.steps_per_block, hp.step_s
+    n = problem.count
+    out = np.empty((2, nb, n))
+    w, k_gain = env.max_course_rate_rad_s, env.course_gain_per_s
+    cruise = env.cruise_speed_m_s
+    c = FREW_C if g.law == "frew" else (g.c if g.law == "fixed" and g.c is not None else FREW_C)
+    target = problem.target
+    for i in range(n):
+        x = float(problem.east_m[i])
+        y = float(problem.north_m[i])
+        chi = float(problem.course_rad[i])
+        speed = float(problem.speed_m_s[i])
+        for b in range(nb):
+            rate_sum = 0.0
+            speed_sum = 0.0
+            for j in range(per):
+                step_k = b * per + j
+                tve, tvn = float(velocity[step_k, 0]), float(velocity[step_k, 1])
+                rx = x - float(target[step_k, 0])
+                ry = y - float(target[step_k, 1])
+                vx = speed * math.sin(chi) - tve
+                vy = speed * math.cos(chi) - tvn
+                tgt = TargetInfo(0.0, 0.0, tve, tvn)
+                rel_course, rel_rate = _relative_course(
+                    rx, ry, vx, vy, c, False, tgt, params, g.radius_m
+                )
+                if tve == 0.0 and tvn == 0.0:
+                    course, rate, speed_cmd = rel_course, rel_rate, cruise
+                else:
+                    course, rate, speed_cmd = _ground_course(
+                        rel_course, rel_rate, tgt, cruise, env, g.relative_speed, env.max_speed_m_s
+                    )
+                u = min(max(k_gain * wrap_pi(course - chi) + rate, -w), w)
+                x += speed * math.sin(chi) * dt
+                y += speed * math.cos(chi) * dt
+                chi += u * dt
+                accel = min(
+                    max(env.speed_gain_per_s * (speed_cmd - speed), -env.max_accel_m_s2),
+                    env.max_accel_m_s2,
+                )
+                speed += accel * dt
+                rate_sum += u
+                speed_sum += speed_cmd
+            out[0, b, i] = rate_sum / per
+            out[1, b, i] = speed_sum / per
+    return out
+
+
+def _horizon_command(
+    state: AgentState, inputs: AgentInputs, params: AgentParams, fallback: Command
+) -> tuple[AgentState, Command, tuple[AgentEvent, ...]]:
+    """``planner = "horizon"``: plan again every ``replan_s`` (from the vehicle's state, on the
+    target's predicted path and the seat), and fly the plan at this tick: its course with its
+    rate fed forward (``course_command``), its speed command. The field's ``fallback`` is
+    flown if the plan cannot be made (reported once per episode as ``horizon-fallback``)."""
+    g, env, ph = params.guidance, params.envelope, params.phase
+    if ph.actuator == "radius":
+        # the autopilot holds its own airspeed: the plan's speeds would not be flown
+        return state, fallback, _NO_EVENTS
+    hp = g.horizon
+    own, tgt = inputs.own, inputs.target
+    current = state.plan
+    events = _NO_EVENTS
+    if current is None or inputs.t_s >= current.t_s + hp.replan_s or inputs.t_s < current.t_s:
+        air = hz.Airframe(
+            env.min_speed_m_s,
+            env.max_speed_m_s,
+            env.max_accel_m_s2,
+            env.max_course_rate_rad_s,
+            env.speed_gain_per_s,
+        )
+        steps = hp.blocks * hp.steps_per_block
+        path, velocity = hz.predict_target(
+            (tgt.v_east_m_s, tgt.v_north_m_s),
+            (tgt.a_east_m_s2, tgt.a_north_m_s2),
+            steps,
+            hp.step_s,
+            hp.manoeuvre_fade_s,
+        )
+        v_end = (float(velocity[-1, 0]), float(velocity[-1, 1]))
+        warm = current if current is not None and inputs.t_s >= current.t_s else None
+        team = inputs.team_positions
+        joint = (
+            hp.joint
+            and ph.law != "none"
+            and len(team) >= 2
+            and len(inputs.team_motion) == len(team)
+        )
+        try:
+            if joint:
+                if not 0 <= params.index < len(team):
+                    raise ValueError(f"vehicle index {params.index} outside a team of {len(team)}")
+                positions = [
+                    (own.east_m, own.north_m) if j == params.index else team[j]
+                    for j in range(len(team))
+                ]
+                motion = [
+                    (own.course_rad, own.speed_m_s) if j == params.index else inputs.team_motion[j]
+                    for j in range(len(team))
+                ]
+                team_problem = hz.TeamProblem(
+                    east_m=np.array([e - tgt.east_m for e, _ in positions]),
+                    north_m=np.array([n - tgt.north_m for _, n in positions]),
+                    course_rad=np.array([c for c, _ in motion]),
+                    speed_m_s=np.array([v for _, v in motion]),
+                    target=path,
+                    target_velocity=v_end,
+                    radius_m=g.radius_m,
+                    airframe=air,
+                    target_velocities=velocity,
+                    orbit_sign=g.orbit_sign,
+                )
+                team_warm = state.team_plan if warm is not None else None
+                guess = _field_guess(team_problem, params, velocity)
+                team_plan = hz.plan_team(inputs.t_s, team_problem, hp, team_warm, guess)
+                current = team_plan.member(params.index, hp.block_s)
+                state = replace(state, team_plan=team_plan)
+            else:
+                problem = hz.Problem(
+                    east_m=own.east_m - tgt.east_m,
+                    north_m=own.north_m - tgt.north_m,
+                    course_rad=own.course_rad,
+                    speed_m_s=own.speed_m_s if own.speed_m_s > 0.0 else env.cruise_speed_m_s,
+                    target=path,
+                    target_velocity=v_end,
+                    radius_m=g.radius_m,
+                    orbit_sign=g.orbit_sign,
+                    airframe=air,
+                    seat=_seat_path(inputs, params, velocity),
+                )
+                current = hz.plan(inputs.t_s, problem, hp, warm)
+                state = replace(state, team_plan=None)
+        except ValueError as exc:
+            if state.plan is not None:
+                events = (AgentEvent(inputs.t_s, "horizon-fallback", str(exc)),)
+            return replace(state, plan=None, team_plan=None), fallback, events
+        if state.plan is None:
+            detail = f"planning {hp.horizon_s:g} s ahead every {hp.replan_s:g} s"
+            events = (AgentEvent(inputs.t_s, "horizon-on", detail),)
+        state = replace(state, plan=current)
+    course, rate, speed = current.at(inputs.t_s)
+    speed = env.clamp_speed(speed)
+    cmd_course = course_command(own.course_rad, course, rate, params.course_loop)
+    command = replace(
+        fallback,
+        course_rad=cmd_course,
+        speed_m_s=speed,
+        field_course_rad=wrap_pi(course),
+        course_rate_ff_rad_s=rate,
+        inverse=False,
+        radius_m=g.radius_m,
+    )
+    return state, command, events
 
 
 def _switch_rule(

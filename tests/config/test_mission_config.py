@@ -174,6 +174,24 @@ def test_track_stage_settings_reach_only_the_track_parameters():
         assert (agent.latency_s, agent.hold_s) == (0.08, 0.2)
 
 
+def test_the_receding_horizon_planner_is_a_track_stage_setting():
+    base = load_config("hil", MissionConfig)
+    assert all(a.track.guidance.planner == "field" for a in build_plan(base).agents)
+    guidance = base.guidance.model_copy(
+        update={"track_planner": "horizon", "track_horizon_s": 30.0, "track_replan_s": 1.0}
+    )
+    for agent in build_plan(base.model_copy(update={"guidance": guidance})).agents:
+        assert agent.track is not None
+        assert agent.track.guidance.planner == "horizon"
+        assert agent.track.guidance.horizon.horizon_s == 30.0
+        assert agent.track.guidance.horizon.replan_s == 1.0
+        assert agent.agent.guidance.planner == "field"
+    for key, value in (("track_planner", "mpc"), ("track_horizon_s", 31.0)):
+        raw = {**BASE, "guidance": {**BASE["guidance"], key: value}}
+        with pytest.raises(ConfigError, match=f"guidance.{key}"):
+            validate_config(raw, MissionConfig, source="m.toml")
+
+
 def test_the_ground_fuses_and_allocates_at_the_missions_periods():
     default = build_plan(load_config("hil", MissionConfig)).ground
     assert (default.fuse_period_s, default.feedback_period_s) == (0.2, 1.0)

@@ -793,6 +793,7 @@ def _control(
         return replace(state, standby_guidance=g), command, events
     fixes = dict(state.teammates)
     team: list[tuple[float, float]] = []
+    motion: list[tuple[float, float]] = []
     index = 0
     in_team = params.vehicle in state.active
     if in_team:
@@ -800,17 +801,21 @@ def _control(
             if vehicle == params.vehicle:
                 index = len(team)
                 team.append((own.east_m, own.north_m))
+                motion.append((own.course_rad, own.speed_m_s))
                 continue
             fix = fixes.get(vehicle)
             if fix is not None and abs(t_s - fix.t_s) <= params.max_age_s:
                 team.append(fix.at(t_s, params.max_age_s))
+                motion.append((fix.course_rad, fix.speed_m_s))
     base = _flown(state, target, params)
     agent = base if base.index == index else replace(base, index=index)
     if wind is not None:
         target = replace(
             target, v_east_m_s=target.v_east_m_s - w_east, v_north_m_s=target.v_north_m_s - w_north
         )
-    inputs = AgentInputs(t_s=t_s, own=own, target=target, team_positions=tuple(team))
+    inputs = AgentInputs(
+        t_s=t_s, own=own, target=target, team_positions=tuple(team), team_motion=tuple(motion)
+    )
     g, command, events = agent_step(state.guidance, inputs, agent)
     state = replace(state, guidance=g)
     if agent.guidance.orbit_plan == "ellipse":
