@@ -1,7 +1,7 @@
 """What a controller with perfect foresight could do over a track segment, against the mission.
 
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
-      [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2]
+      [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -451,8 +451,17 @@ def main() -> None:
     ap.add_argument(
         "--perturbed", type=int, default=2, help="extra starts: the flown controls plus noise"
     )
+    ap.add_argument(
+        "--planner",
+        choices=("field", "horizon"),
+        default=None,
+        help="the mission's track-stage planner ([guidance] track_planner; default: the file's)",
+    )
     args = ap.parse_args()
     base = load_config(args.config, MissionConfig)
+    if args.planner is not None:
+        guidance = base.guidance.model_copy(update={"track_planner": args.planner})
+        base = base.model_copy(update={"guidance": guidance})
     lim = base.limits
     airframe = Airframe(
         lim.min_speed_m_s, lim.max_speed_m_s, lim.max_accel_m_s2, lim.max_course_rate_rad_s

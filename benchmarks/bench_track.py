@@ -17,6 +17,9 @@ all on the same seeds:
 - +latency: planned, the agents steering on the state predicted for the middle of each
   command's 0.1 s hold, ``--latency-ticks`` * 0.1 s late (``latency_s``, ``hold_s``);
 - +both: planned with the cap and the latency compensation;
+- with ``--horizon``, also +horizon: +latency with the receding-horizon planner
+  (``planner="horizon"``, ``app.core.guidance.horizon``: the team's course rates and speeds
+  planned 40 s ahead on the estimate every 2 s), printed with the agents' CPU per run;
 - with ``--truth``, also +truth: +latency with every agent steering on the true target
   (``MissionSimSetup.truth_fed``), what guidance and phase keeping give with perfect knowledge
   of the target, which separates their share of the errors from the estimation's.
@@ -111,16 +114,19 @@ def mean_figures(runs: list[dict], labels: tuple[str, ...]) -> dict[str, dict[st
     return out
 
 
-def variants(plan: MissionPlan, lag: float) -> dict[str, MissionPlan]:
+def variants(plan: MissionPlan, lag: float, horizon: bool = False) -> dict[str, MissionPlan]:
     base = plan.agents[0].agent.guidance
     planned: dict[str, Any] = {"law": "frew", "orbit_plan": "ellipse", "speed_cap": False}
-    return {
+    out = {
         "paper": variant(plan, law=base.law, orbit_plan="circle", speed_cap=False),
         "planned": variant(plan, **planned),
         "+cap": variant(plan, **(planned | {"speed_cap": True})),
         "+latency": variant(plan, lag, HOLD_S, **planned),
         "+both": variant(plan, lag, HOLD_S, **(planned | {"speed_cap": True})),
     }
+    if horizon:
+        out["+horizon"] = variant(plan, lag, HOLD_S, **(planned | {"planner": "horizon"}))
+    return out
 
 
 def main() -> None:
@@ -130,6 +136,9 @@ def main() -> None:
     parser.add_argument("--latency-ticks", type=int, default=0)
     parser.add_argument(
         "--truth", action="store_true", help="also fly +latency with the true target (+truth)"
+    )
+    parser.add_argument(
+        "--horizon", action="store_true", help="also fly +latency with the receding horizon"
     )
     parser.add_argument(
         "--vary-command",
@@ -147,7 +156,7 @@ def main() -> None:
         moved = config.model_copy(
             update={"tracking_command_s": config.tracking_command_s + args.vary_command * seed}
         )
-        plans = variants(build_plan(moved), lag)
+        plans = variants(build_plan(moved), lag, args.horizon)
         for name, p in plans.items():
             runs.setdefault(name, []).append(fly(p, seed, args.latency_ticks))
         if args.truth:
