@@ -97,10 +97,17 @@ class VehicleConfig:
     #: how long before the simulation started this vehicle's autopilot booted (s): its
     #: ``time_boot_ms`` starts there; None: ``SimConfig.boot_spacing_s`` times its index
     boot_offset_s: float | None = None
+    #: the one-way transport delay of its link (simulated s), in each direction: every
+    #: datagram it sends reaches the ground station, and every one it is sent reaches it, this
+    #: much later (a telemetry radio or a cellular modem; 0: loopback)
+    link_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
         _positive("cruise_speed_m_s", self.cruise_speed_m_s)
         _finite("altitude_m", self.altitude_m)
+        _non_negative("link_delay_s", self.link_delay_s)
+        if self.link_delay_s > 5.0:
+            raise ValueError(f"link_delay_s must be at most 5 s, got {self.link_delay_s}")
         if self.boot_offset_s is not None:
             _non_negative("boot_offset_s", self.boot_offset_s)
         lim = self.limits

@@ -465,6 +465,7 @@ class SimulatorServer:
             for addr in [a for a, seen in link.learned.items() if now - seen > PEER_EXPIRY_WALL_S]:
                 del link.learned[addr]
         peers = [link.gcs, *(a for a in link.learned if a != link.gcs)]
+        delay_wall_s = self.config.vehicles[link.index].link_delay_s / self._speedup
         for component, msg in out:
             encoder = link.encoders[component]
             try:
@@ -474,18 +475,35 @@ class SimulatorServer:
                 continue
             encoder.seq = (encoder.seq + 1) % 256
             for peer in peers:
-                try:
-                    link.transport.sendto(buf, peer)
-                    link.stats.packets_out += 1
-                except OSError as exc:
-                    link.stats.send_errors += 1
-                    log.debug("vehicle %d: send to %s failed: %s", link.system_id, peer, exc)
+                if delay_wall_s > 0.0:
+                    asyncio.get_running_loop().call_later(
+                        delay_wall_s, self._send_now, link, buf, peer
+                    )
+                else:
+                    self._send_now(link, buf, peer)
+
+    def _send_now(self, link: _Link, buf: bytes, peer: Address) -> None:
+        if link.transport is None or not link.up:
+            return
+        try:
+            link.transport.sendto(buf, peer)
+            link.stats.packets_out += 1
+        except OSError as exc:
+            link.stats.send_errors += 1
+            log.debug("vehicle %d: send to %s failed: %s", link.system_id, peer, exc)
 
     def _on_socket_error(self, link: _Link, exc: Exception) -> None:
         link.stats.send_errors += 1
         log.debug("vehicle %d: socket error %s", link.system_id, exc)
 
     def _on_datagram(self, link: _Link, data: bytes, addr: Address) -> None:
+        delay_wall_s = self.config.vehicles[link.index].link_delay_s / self._speedup
+        if delay_wall_s > 0.0:
+            asyncio.get_running_loop().call_later(delay_wall_s, self._receive, link, data, addr)
+        else:
+            self._receive(link, data, addr)
+
+    def _receive(self, link: _Link, data: bytes, addr: Address) -> None:
         stats = link.stats
         stats.packets_in += 1
         if not link.up:

@@ -86,6 +86,7 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         arduplane_turn_learning=cfg.link.arduplane_turn_learning,
         arduplane_speed_learning=cfg.link.arduplane_speed_learning,
         px4_airspeed_via_trim=cfg.link.px4_airspeed_via_trim,
+        timesync_period_s=cfg.link.timesync_period_s,
     )
 
 

@@ -190,6 +190,11 @@ class LinkSettings(StrictModel):
     arriving faster (PX4 streams position at 50 Hz) is coalesced, the frames between counted
     as ``frames_coalesced``, so an agent's CPU is that of the control rate. 0: steer on every
     frame.
+    ``timesync_period_s``: how often (wall s) each link measures its round trip with a
+    TIMESYNC request; every frame (and the camera fixes on it) is then stamped when it was
+    sampled, its arrival time less half the least round trip, so that vehicles behind links
+    of different delays agree on where the team is (docs/vehicle-link.md). 0: not measured,
+    frames stamped on arrival.
     """
 
     connect: list[str] = Field(default_factory=list)
@@ -209,6 +214,7 @@ class LinkSettings(StrictModel):
     arduplane_speed_learning: bool = False
     px4_airspeed_via_trim: bool = False
     control_rate_hz: NonNegative = 10.0
+    timesync_period_s: Annotated[float, Field(ge=0.0, le=60.0, allow_inf_nan=False)] = 1.0
 
     @field_validator("gcs_forward")
     @classmethod
@@ -240,7 +246,9 @@ class SimSettings(StrictModel):
     takes off: ``standby`` (bunched on the standby circle, the default) or ``home`` (a row of
     homes ``home_spacing_m`` apart going east from the origin, facing north, as three SITL
     instances started with their homes 60 m apart), so that the simulator flies a SITL mission
-    file from where the real autopilots start."""
+    file from where the real autopilots start. ``link_delays_s``: each vehicle's one-way link
+    delay (simulated s, both directions; vehicle i takes entry i, 0 past the list's end), as
+    through a telemetry radio or a cellular modem."""
 
     autopilot: Literal["px4", "arduplane"] = "px4"
     speedup: Speedup = 3.0
@@ -264,6 +272,7 @@ class SimSettings(StrictModel):
     arduplane_guided_rebase: bool = True
     start: Literal["standby", "home"] = "standby"
     home_spacing_m: Positive = 60.0
+    link_delays_s: tuple[Annotated[float, Field(ge=0.0, le=5.0, allow_inf_nan=False)], ...] = ()
 
 
 class BusLoginConfig(StrictModel):

@@ -167,12 +167,14 @@ def team_starts(plan: MissionPlan) -> list[FixedWingState]:
 def sim_config(plan: MissionPlan, base_port: int) -> SimConfig:
     """The built-in simulator for a plan: the team launched where ``team_starts`` puts it."""
     cfg = plan.config
+    delays = cfg.sim.link_delays_s
     vehicles = tuple(
         VehicleConfig(
             limits=cfg.limits.build(),
             start=start,
             cruise_speed_m_s=cfg.limits.cruise_speed_m_s,
             altitude_m=cfg.link.vehicle_altitude_m(i),
+            link_delay_s=delays[i] if i < len(delays) else 0.0,
         )
         for i, start in enumerate(team_starts(plan))
     )

@@ -214,3 +214,21 @@ def test_steering_px4s_airspeed_through_its_trim_is_opt_in_and_reaches_the_link(
     raw["link"]["px4_airspeed_via_trim"] = True
     config = link_config(build_plan(MissionConfig.model_validate(raw)), False)
     assert config.px4_airspeed_via_trim
+
+
+def test_link_delays_reach_the_simulator_and_timesync_the_links():
+    from app.compose.parts import link_config
+
+    raw = load_config("hil", MissionConfig).model_dump()
+    plan = build_plan(MissionConfig.model_validate(raw))
+    assert [v.link_delay_s for v in sim_config(plan, base_port=30000).vehicles] == [0.0] * 3
+    assert link_config(plan, True).timesync_period_s == 1.0
+    raw["sim"]["link_delays_s"] = [0.3, 0.1]
+    raw["link"]["timesync_period_s"] = 0.0
+    plan = build_plan(MissionConfig.model_validate(raw))
+    delays = [v.link_delay_s for v in sim_config(plan, base_port=30000).vehicles]
+    assert delays == [0.3, 0.1, 0.0]
+    assert link_config(plan, True).timesync_period_s == 0.0
+    raw["sim"]["link_delays_s"] = [-0.1]
+    with pytest.raises(ValidationError, match="link_delays_s"):
+        MissionConfig.model_validate(raw)

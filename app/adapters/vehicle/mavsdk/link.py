@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import math
 import time
@@ -31,6 +32,7 @@ from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.autopilot import Autopilot
+from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
@@ -47,6 +49,7 @@ from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.adapters.vehicle.mavsdk import telemetry
 from app.adapters.vehicle.mavsdk.broadcast import Broadcast, Subscription
 from app.adapters.vehicle.mavsdk.clockmap import BootClockMap, Rebase
+from app.adapters.vehicle.mavsdk.timesync import LinkDelay, follow
 from app.errors import LinkError
 from app.runtime.ports.vehicle import (
     ClockRebased,
@@ -107,6 +110,10 @@ class LinkConfig:
     ahead of the host's clock by more, is a new boot clock.
     ``restore_timeout_s``: how long the exit path waits for the adapter to put back the
     parameters it changed.
+    ``timesync_period_s``: how often (wall s) a TIMESYNC request measures the link's round trip
+    (``timesync.LinkDelay``); with a mission clock, every frame's stamp is then moved back by
+    the measured one-way delay, at most ``delay_step_s`` per frame (0: not measured, frames
+    stamped when they arrive).
     """
 
     limits: SetpointLimits
@@ -129,8 +136,14 @@ class LinkConfig:
     heartbeat_timeout_s: float = 3.0
     clock_window_s: float = 10.0
     restore_timeout_s: float = 5.0
+    timesync_period_s: float = 1.0
+    delay_step_s: float = 0.005
 
     def __post_init__(self) -> None:
+        for name in ("timesync_period_s", "delay_step_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         for name in (
             "link_timeout_s",
             "mode_confirm_timeout_s",
@@ -166,6 +179,11 @@ class LinkCounters:
     limited_by: dict[str, int] = field(default_factory=dict)
     turn_efficiency: float | None = None
     speed_lag_s: float | None = None
+    #: TIMESYNC answers taken, the least round trip (s) and the one-way delay the frames'
+    #: stamps are moved back by (s; mission time)
+    timesync_answers: int = 0
+    round_trip_min_s: float | None = None
+    link_delay_s: float = 0.0
 
 
 class MavsdkVehicleLink:
@@ -191,6 +209,7 @@ class MavsdkVehicleLink:
         self._system = system
         self._mission_clock = mission_clock
         self._boot_clock = BootClockMap(config.clock_window_s, config.clock_reset_s)
+        self._delay = LinkDelay()
         self._airspeed_m_s: float | None = None
         #: the autopilot's newest bank (ATTITUDE roll, rad) and the link-clock time it came
         self._roll_rad: float | None = None
@@ -315,6 +334,9 @@ class MavsdkVehicleLink:
             }
             if name == "px4-fixed-wing":
                 readers["local-position"] = self._read_local_position()
+            if self._config.timesync_period_s > 0.0:
+                readers["timesync"] = self._read_timesync()
+                readers["timesync-requests"] = self._request_timesync()
             for reader, coro in readers.items():
                 self._tasks.append(group.create_task(coro, name=f"vehicle{self._id}-{reader}"))
             self._stack = stack.pop_all()
@@ -519,6 +541,7 @@ class MavsdkVehicleLink:
         previous = self._latest
         if host_t is not None:
             t_s, rebase = self._boot_clock.update(t_s, host_t)
+            t_s -= self._delay_correction()
             if rebase is not None:
                 if previous is not None:  # a new base: nothing before it to be late against
                     self._previous = None
@@ -546,6 +569,65 @@ class MavsdkVehicleLink:
             airspeed_m_s=self._airspeed_m_s,
             wind_m_s=self._current_wind(),
         )
+
+    def _delay_correction(self) -> float:
+        """The one-way delay this frame's stamp is moved back by: the measured one
+        (``LinkDelay.one_way_s``; 0 before the first answer), followed at most
+        ``delay_step_s`` per frame."""
+        c = self.counters
+        wanted = self._delay.one_way_s or 0.0
+        c.link_delay_s = follow(c.link_delay_s, wanted, self._config.delay_step_s)
+        return c.link_delay_s
+
+    def _host_time(self) -> float:
+        """The host's time the round trips are measured on: mission time where there is a
+        mission clock (the frames' stamps are), else the monotonic clock."""
+        mission = self._mission_clock() if self._mission_clock is not None else None
+        return self._clock() if mission is None else mission
+
+    async def _request_timesync(self) -> None:
+        """A TIMESYNC request (tc1 = 0, ts1 unique) every ``timesync_period_s`` of wall time."""
+        period = self._config.timesync_period_s
+        adapter_component = self._config.autopilot_component_id
+        while True:
+            ts1 = time.monotonic_ns()
+            self._delay.sent(ts1, self._host_time())
+            fields = {
+                "tc1": 0,
+                "ts1": ts1,
+                "target_system": self._id,
+                "target_component": adapter_component,
+            }
+            message = MavlinkMessage(
+                message_name="TIMESYNC",
+                target_system_id=self._id,
+                target_component_id=adapter_component,
+                fields_json=json.dumps(fields),
+            )
+            try:
+                await self._direct.send_message(message)
+            except (MavsdkError, MavlinkDirectError, RuntimeError) as exc:
+                log.debug("vehicle %d: TIMESYNC request not sent: %s", self._id, exc)
+            await asyncio.sleep(period)
+
+    async def _read_timesync(self) -> None:
+        """Answers to our TIMESYNC requests (tc1 != 0, ts1 ours); the vehicle's own requests
+        (tc1 = 0) and answers to others' are not ours to take."""
+        async with aclosing(self._direct.subscribe_message("TIMESYNC")) as messages:
+            async for message in messages:
+                try:
+                    f = telemetry.fields(message)
+                    tc1, ts1 = int(f["tc1"]), int(f["ts1"])
+                except (ValueError, KeyError, TypeError) as exc:
+                    self._malformed("TIMESYNC", exc)
+                    continue
+                if tc1 == 0:
+                    continue
+                if self._delay.answered(ts1, self._host_time()) is not None:
+                    c = self.counters
+                    c.timesync_answers = self._delay.answers
+                    one_way = self._delay.one_way_s
+                    c.round_trip_min_s = None if one_way is None else 2.0 * one_way
 
     def _current_wind(self) -> tuple[float, float] | None:
         """The autopilot's wind, unless it has not come for ``WIND_STALE_S`` (PX4 sends it at
