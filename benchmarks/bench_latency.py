@@ -2,7 +2,7 @@
 50 Hz, side by side in one run (issue #15 item 1).
 
 Run:  .venv/bin/python -m benchmarks.bench_latency [CONFIG] [--latency 0.5] [--rates 5 10 50]
-      [--seeds 6] [--vary-command 4] [--told]
+      [--seeds 6] [--vary-command 4] [--told] [--mavlink [--speedup X]]
 
 Flies ``CONFIG`` (default ``hil``) on the mission's fast simulation
 (``app.compose.mission_fastsim``: the agents' and the ground's logic on the eq. (2) plant, the
@@ -21,17 +21,30 @@ the figures after the target's turns depend far more on where each vehicle is wh
 turns than on the camera noise a seed draws, and with one command time a comparison is one
 draw of that configuration (a latency that moves the team by a few metres before B can double
 the B-C figures, or halve them).
+
+With ``--mavlink`` each run is instead ``standoff fly`` on the built-in simulator (its own
+process, MAVSDK over UDP, the in-process bus), one run per variant, at ``[sim]
+telemetry_rate_hz`` = each rate: the latency is then the simulator holding every datagram of
+every vehicle's link ``--latency / 2`` seconds each way (``[sim] link_delays_s``), so a command
+acts ``--latency`` after the frame it was computed from was sampled, and the frames arrive half
+of that old. The agents are not told; what they fly on is what they measure (the links'
+TIMESYNC delay, the course-loop identifier's). ``--speedup`` sets the simulator's speed-up.
 """
 
 import argparse
+import asyncio
 import re
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
+from app.compose.mission import Mission
 from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
+from sitl.ports import find_free_udp_base_port
 
 _DELAY = re.compile(r"delay = ([0-9.]+) s")
 
@@ -73,8 +86,13 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--vary-command", type=float, default=4.0, help="s per seed (4)")
     parser.add_argument("--told", action="store_true", help="also a run told the latency")
+    parser.add_argument("--mavlink", action="store_true", help="standoff fly over MAVLink")
+    parser.add_argument("--speedup", type=float, help="simulator speed-up with --mavlink")
     args = parser.parse_args()
     config = load_config(args.config, MissionConfig)
+    if args.mavlink:
+        _main_mavlink(config, args.rates, args.latency, args.speedup)
+        return
     told = config.model_copy(
         update={"guidance": config.guidance.model_copy(update={"latency_s": args.latency})}
     )
@@ -124,6 +142,58 @@ def main() -> None:
         " spacing error deg; means over the seeds, ratios against the same rate's run without"
         " latency; never: some seed did not form; delays: the identifiers' last estimates)"
     )
+
+
+def _main_mavlink(
+    config: MissionConfig, rates: list[float], latency_s: float, speedup: float | None
+) -> None:
+    sim = config.sim if speedup is None else config.sim.model_copy(update={"speedup": speedup})
+    print(
+        f"bench_latency: {config.name}, {config.vehicles} vehicles, MAVLink (built-in "
+        f"simulator at {sim.speedup:g}x), rates {', '.join(f'{r:g}' for r in rates)} Hz, "
+        f"latency {latency_s:g} s ({latency_s / 2:g} s each way), one run each"
+    )
+    root = Path(tempfile.mkdtemp(prefix="bench-latency-"))
+    Figures = dict[str, float | None]
+    table: list[tuple[str, Figures, str, Figures]] = []
+    for rate in rates:
+        base: Figures | None = None
+        for name, delay in (("no latency", 0.0), (f"{latency_s:g} s untold", latency_s / 2)):
+            run_sim = sim.model_copy(
+                update={"telemetry_rate_hz": rate, "link_delays_s": (delay,) * config.vehicles}
+            )
+            variant = config.model_copy(update={"sim": run_sim})
+            start = time.monotonic()
+            out_dir = root / f"{rate:g}hz-{delay:g}"
+            summary = asyncio.run(_fly_mavlink(variant, out_dir))
+            figures = _figures(summary)
+            base = base or figures
+            links = (summary.get("links") or {}).values()
+            measured = [c.get("link_delay_s") for c in links if c.get("link_delay_s") is not None]
+            said = f"{min(measured):.3f}-{max(measured):.3f} s" if measured else "none"
+            table.append((f"{rate:g} Hz, {name}", figures, said, base))
+            print(
+                f"  flown: {rate:g} Hz, {name} ({time.monotonic() - start:.0f} s wall, {out_dir})",
+                flush=True,
+            )
+    keys = list(table[0][1])
+    print(f"\n{'run':<24}" + "".join(f"{k:>14}" for k in keys) + "   link delay measured")
+    for name, figures, said, base in table:
+        cells = "".join(f"{_cell(figures.get(k), base.get(k)):>14}" for k in keys)
+        print(f"{name:<24}{cells}   {said}")
+    print(
+        "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
+        " spacing error deg; ratios against the same rate's run without latency; link delay:"
+        " each link's TIMESYNC one-way estimate at the end)"
+    )
+
+
+async def _fly_mavlink(config: MissionConfig, out_dir: Path) -> dict[str, Any]:
+    plan = build_plan(config)
+    port = find_free_udp_base_port(plan.count)
+    async with asyncio.timeout(20 * 60):
+        result = await Mission(plan, out_dir, base_port=port).run()
+    return result.summary
 
 
 if __name__ == "__main__":
