@@ -176,7 +176,9 @@ def test_track_stage_settings_reach_only_the_track_parameters():
 
 def test_the_receding_horizon_planner_is_a_track_stage_setting():
     base = load_config("hil", MissionConfig)
-    assert all(a.track.guidance.planner == "field" for a in build_plan(base).agents)
+    for agent in build_plan(base).agents:
+        assert agent.track is not None
+        assert agent.track.guidance.planner == "field"
     guidance = base.guidance.model_copy(
         update={"track_planner": "horizon", "track_horizon_s": 30.0, "track_replan_s": 1.0}
     )

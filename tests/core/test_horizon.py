@@ -139,7 +139,10 @@ def _fly(planner, vt=7.0, t_end_s=200.0, team=1):
     starts = (0.0, 1.9, 4.3)[:team]
     states = [FixedWingState(90 * math.cos(a), 90 * math.sin(a), -a, 14.0) for a in starts]
     memory = [AgentState() for _ in range(team)]
-    dist, spacing, speeds, rates = [], [], [], []
+    dist: list[float] = []
+    spacing: list[float] = []
+    speeds: list[float] = []
+    rates: list[float] = []
     for k in range(int(t_end_s * 10)):
         t = 0.1 * k
         target = TargetInfo(0.0, vt * t, 0.0, vt)
