@@ -820,13 +820,19 @@ def _horizon_command(
     """``planner = "horizon"``: plan again every ``replan_s`` (from the vehicle's state, on the
     target's predicted path and the seat), and fly the plan at this tick: its course with its
     rate fed forward (``course_command``), its speed command. The field's ``fallback`` is
-    flown if the plan cannot be made (reported once per episode as ``horizon-fallback``)."""
+    flown if the plan cannot be made (reported once per episode as ``horizon-fallback``), and
+    around a target slower than ``min_target_speed_m_s``."""
     g, env, ph = params.guidance, params.envelope, params.phase
     if ph.actuator == "radius":
         # the autopilot holds its own airspeed: the plan's speeds would not be flown
         return state, fallback, _NO_EVENTS
     hp = g.horizon
     own, tgt = inputs.own, inputs.target
+    if math.hypot(tgt.v_east_m_s, tgt.v_north_m_s) < hp.min_target_speed_m_s:
+        # a still target: the field holds its circle exactly (a new plan starts when it moves)
+        if state.plan is None:
+            return state, fallback, _NO_EVENTS
+        return replace(state, plan=None, team_plan=None), fallback, _NO_EVENTS
     current = state.plan
     events = _NO_EVENTS
     if current is None or inputs.t_s >= current.t_s + hp.replan_s or inputs.t_s < current.t_s:

@@ -258,3 +258,22 @@ def test_a_bad_planner_name_is_refused():
         GuidanceParams(90.0, planner="mpc")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="whole number"):
         hz.HorizonParams(horizon_s=41.0)
+
+
+def test_around_a_still_target_the_field_is_flown_and_the_plan_dropped():
+    base = GuidanceParams(90.0, law="frew", orbit_plan="ellipse", inverse_field=False)
+    horizon = replace(base, planner="horizon")
+    phase = PhaseParams("paper", gain_per_s=0.1)
+    team = ((100.0, 0.0), (-50.0, 80.0), (-50.0, -80.0))
+    motion = ((0.0, 14.0), (2.6, 14.0), (4.7, 14.0))
+    own = OwnTelemetry(100.0, 0.0, 0.0, 14.0)
+    moving = AgentInputs(5.0, own, TargetInfo(0.0, 0.0, 0.0, 7.0), team, motion)
+    planned, _, _ = agent_step(AgentState(), moving, AgentParams(0, ENV, horizon, phase))
+    assert planned.plan is not None
+    still = replace(moving, t_s=5.1, target=TargetInfo(0.0, 0.0, 0.0, 0.5))
+    _, field_cmd, _ = agent_step(AgentState(), still, AgentParams(0, ENV, base, phase))
+    state, cmd, events = agent_step(planned, still, AgentParams(0, ENV, horizon, phase))
+    assert cmd == field_cmd
+    assert state.plan is None
+    assert state.team_plan is None
+    assert events == ()

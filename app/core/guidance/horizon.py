@@ -54,6 +54,9 @@ class HorizonParams:
     rate_margin: float = 1.0
     manoeuvre_fade_s: float = 5.0
     max_iterations: int = 20
+    #: below this target speed the field is flown (it holds a still target's circle exactly;
+    #: the plan's 2 s blocks do not)
+    min_target_speed_m_s: float = 1.5
     #: the team plan's penalty on a phase running against the orbit's direction: the
     #: relative velocity's component along the orbit below ``direction_min_m_s``, per m/s
     direction_weight: float = 1.0
