@@ -277,3 +277,14 @@ def test_around_a_still_target_the_field_is_flown_and_the_plan_dropped():
     assert state.plan is None
     assert state.team_plan is None
     assert events == ()
+
+
+def test_in_the_air_mass_the_teammates_motion_is_through_the_air_too():
+    from app.core.mission.agent import _air_motion
+
+    # flying north at 14 m/s over the ground in air moving 3 m/s east: through the air the
+    # teammate heads a little west of north at 14.3 m/s (as the agent's own telemetry then is)
+    course, speed = _air_motion(0.0, 14.0, (3.0, 0.0))
+    assert course == pytest.approx(math.atan2(-3.0, 14.0))
+    assert speed == pytest.approx(math.hypot(3.0, 14.0))
+    assert _air_motion(0.4, 12.0, None) == (0.4, 12.0)

@@ -806,7 +806,7 @@ def _control(
             fix = fixes.get(vehicle)
             if fix is not None and abs(t_s - fix.t_s) <= params.max_age_s:
                 team.append(fix.at(t_s, params.max_age_s))
-                motion.append((fix.course_rad, fix.speed_m_s))
+                motion.append(_air_motion(fix.course_rad, fix.speed_m_s, wind))
     base = _flown(state, target, params)
     agent = base if base.index == index else replace(base, index=index)
     if wind is not None:
@@ -822,6 +822,18 @@ def _control(
         state, planned = _orbit_planned(state, t_s, target, agent, wind)
         events = (*events, *planned)
     return state, command, events
+
+
+def _air_motion(
+    course_rad: float, speed_m_s: float, wind: tuple[float, float] | None
+) -> tuple[float, float]:
+    """A teammate's (course, speed) over the ground, or through the air mass where the agent
+    flies in it (``wind``: the air's motion east, north m/s), as its own telemetry then is."""
+    if wind is None:
+        return course_rad, speed_m_s
+    ve = speed_m_s * math.sin(course_rad) - wind[0]
+    vn = speed_m_s * math.cos(course_rad) - wind[1]
+    return math.atan2(ve, vn), math.hypot(ve, vn)
 
 
 def _orbit_planned(
