@@ -11,7 +11,7 @@ import sys
 import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from app.cli._options import add_mission_options
 from app.errors import ConfigError
@@ -236,6 +236,22 @@ def _cpu_line(summary: dict[str, object]) -> str:
     )
 
 
+def _respace_line(loss: dict[str, Any]) -> str:
+    after = loss.get("after_first") or {}
+    held = ""
+    if after:
+        held = (
+            f"; from then spacing error RMS {_fmt(after['spacing_error_deg']['rms'])} deg,"
+            f" within {100.0 * after['within_fraction']:.0f} % of"
+            f" {_fmt(after['duration_s'])} s"
+        )
+    return (
+        f"vehicle lost at {_fmt(loss.get('t_s'))} s ({loss.get('vehicles_before')} ->"
+        f" {loss.get('vehicles_after')}): re-spaced within {_fmt(loss.get('tolerance_deg'))} deg"
+        f" after {_fmt(loss.get('first_within_s'))} s{held}"
+    )
+
+
 def report(summary: dict[str, object]) -> str:
     """The run's headline figures, a few lines for the terminal (the full set: summary.json)."""
     conv = summary.get("convergence")
@@ -249,6 +265,16 @@ def report(summary: dict[str, object]) -> str:
             f" spaced {_fmt(conv.get('time_to_spacing_s'))} s,"
             f" both {_fmt(conv.get('time_to_formation_s'))} s"
         )
+        first = conv.get("first_within")
+        if isinstance(first, dict):
+            lines.append(
+                f"first all within {_fmt(first.get('radius_tolerance_m'))} m and"
+                f" {_fmt(first.get('spacing_tolerance_deg'))} deg at one instant:"
+                f" {_fmt(first.get('t_s'))} s"
+            )
+    respace = summary.get("respace")
+    if isinstance(respace, list):
+        lines.extend(_respace_line(loss) for loss in respace if isinstance(loss, dict))
     behind = _falling_behind(summary)
     if behind:
         lines.append(behind)

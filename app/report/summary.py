@@ -83,12 +83,20 @@ def summarize(
     radius_tolerance_m: float = 3.0,
     spacing_tolerance_rad: float = math.radians(2.0),
     hold_s: float = 5.0,
+    loose_spacing_tolerance_rad: float = math.radians(5.0),
 ) -> dict[str, Any]:
     """Per part of the run and per vehicle: distance, spacing, speed and estimation figures.
 
     Returns ``{"schema_version": 2, "parts": {key: {"vehicles": {number: figures}, "team":
-    figures}}, "convergence": {...}}`` (vehicles numbered from 1) with distances in metres,
-    angles in degrees, speeds in m/s and times in seconds after the tracking command.
+    figures}}, "convergence": {...}, "respace": [...]}`` (vehicles numbered from 1) with
+    distances in metres, angles in degrees, speeds in m/s and times in seconds after the
+    tracking command.
+
+    ``convergence`` has the formation held (every vehicle within ``radius_tolerance_m`` and
+    every spacing within ``spacing_tolerance_rad`` for ``hold_s``) and, in ``first_within``,
+    the first instant every vehicle is within ``radius_tolerance_m`` and every spacing within
+    ``loose_spacing_tolerance_rad`` (no hold). ``respace`` has one entry per loss of a vehicle
+    after the tracking command (``respace_after_losses``).
     """
     rows = sorted(samples, key=lambda s: s.t_s)
     parts: dict[str, list[TeamSample]] = {}
@@ -166,11 +174,19 @@ def summarize(
         "radius_tolerance_m": radius_tolerance_m,
         "spacing_tolerance_deg": math.degrees(spacing_tolerance_rad),
         "hold_s": hold_s,
+        "first_within": {
+            "t_s": since_command(
+                _first_instant(after, radius_m, radius_tolerance_m, loose_spacing_tolerance_rad)
+            ),
+            "radius_tolerance_m": radius_tolerance_m,
+            "spacing_tolerance_deg": math.degrees(loose_spacing_tolerance_rad),
+        },
     }
     out: dict[str, Any] = {
         "schema_version": SUMMARY_SCHEMA_VERSION,
         "parts": out_parts,
         "convergence": convergence,
+        "respace": respace_after_losses(after, tracking_command_t_s, loose_spacing_tolerance_rad),
     }
     separation = closest_pair(rows)
     if separation is not None:
@@ -178,13 +194,72 @@ def summarize(
     return out
 
 
+def _first_instant(
+    samples: Sequence[TeamSample], radius_m: float, radius_tol_m: float, spacing_tol_rad: float
+) -> float | None:
+    """The first sample time at which every active vehicle is within ``radius_tol_m`` of the
+    circle and every spacing within ``spacing_tol_rad``; None if never."""
+    for s in samples:
+        dist, spacing = s.distance_errors(radius_m), s.spacing_errors()
+        if (
+            dist
+            and spacing
+            and all(abs(e) <= radius_tol_m for e in dist.values())
+            and all(abs(e) <= spacing_tol_rad for e in spacing.values())
+        ):
+            return s.t_s
+    return None
+
+
+def respace_after_losses(
+    samples: Sequence[TeamSample], tracking_command_t_s: float, tolerance_rad: float
+) -> list[dict[str, Any]]:
+    """How the team re-spaced after each loss of a vehicle (the number of active vehicles
+    falling, to at least two): when the loss was seen (``t_s``, after the tracking command),
+    how many flew before and after, ``first_within_s`` (seconds from the loss until every
+    spacing is first within ``tolerance_rad`` of 2 pi / n; None if never before the next loss
+    or the end) and, from then to the next loss or the end, the RMS and largest spacing error
+    (deg) and the fraction of samples within the tolerance."""
+    out: list[dict[str, Any]] = []
+    counts = [sum(v.active for v in s.vehicles) for s in samples]
+    losses = [i for i in range(1, len(samples)) if 2 <= counts[i] < counts[i - 1]]
+    for k, i in enumerate(losses):
+        end = losses[k + 1] if k + 1 < len(losses) else len(samples)
+        worst = [
+            max((abs(e) for e in s.spacing_errors().values()), default=0.0) for s in samples[i:end]
+        ]
+        first = next((j for j, w in enumerate(worst) if w <= tolerance_rad), None)
+        entry: dict[str, Any] = {
+            "t_s": samples[i].t_s - tracking_command_t_s,
+            "vehicles_before": counts[i - 1],
+            "vehicles_after": counts[i],
+            "first_within_s": None if first is None else samples[i + first].t_s - samples[i].t_s,
+            "tolerance_deg": math.degrees(tolerance_rad),
+        }
+        if first is not None:
+            errs = [
+                math.degrees(e)
+                for s in samples[i + first : end]
+                for e in s.spacing_errors().values()
+            ]
+            entry["after_first"] = {
+                "spacing_error_deg": _stats(errs),
+                "within_fraction": sum(w <= tolerance_rad for w in worst[first:])
+                / len(worst[first:]),
+                "duration_s": samples[end - 1].t_s - samples[i + first].t_s,
+            }
+        out.append(entry)
+    return out
+
+
 def closest_pair(samples: Sequence[TeamSample]) -> dict[str, Any] | None:
-    """The least 3-D distance between two vehicles over the samples (of those whose height
-    is known): metres, when (s of mission time), which pair (numbered from 1), and the
-    horizontal and vertical parts; None without two heights at any one time."""
+    """The least 3-D distance between two active vehicles over the samples (of those whose
+    height is known; a lost vehicle's last report is not a position): metres, when (s of
+    mission time), which pair (numbered from 1), and the horizontal and vertical parts; None
+    without two heights at any one time."""
     best: tuple[float, float, int, int, float, float] | None = None
     for s in samples:
-        known = [(v, v.up_m) for v in s.vehicles if v.up_m is not None]
+        known = [(v, v.up_m) for v in s.vehicles if v.up_m is not None and v.active]
         for i, (a, a_up) in enumerate(known):
             for b, b_up in known[i + 1 :]:
                 h = math.hypot(a.east_m - b.east_m, a.north_m - b.north_m)
