@@ -72,9 +72,13 @@ class MissionGuidanceConfig(GuidanceConfig):
 
 class MissionPhaseConfig(PhaseConfig):
     """Phase keeping (``PhaseConfig``) in gather and adjust; ``track_gain_per_s`` replaces the
-    gain in the track stage (None: the same)."""
+    gain in the track stage (None: the same). ``gather_lead_speed_m_s``: in gather and adjust
+    the vehicle furthest behind its seat flies this speed and the others slower by the law, so
+    that the team closes its gaps at this speed rather than about cruise (None: about cruise,
+    the paper's law); within the envelope's speed range."""
 
     track_gain_per_s: NonNegative | None = None
+    gather_lead_speed_m_s: Positive | None = None
 
 
 class StandbyConfig(StrictModel):
@@ -339,6 +343,12 @@ class MissionConfig(StrictModel):
     @model_validator(mode="after")
     def _phase_band_fits(self) -> "MissionConfig":
         self.phase.check_band(self.radius_m)
+        lead, lim = self.phase.gather_lead_speed_m_s, self.limits
+        if lead is not None and not lim.min_speed_m_s <= lead <= lim.max_speed_m_s:
+            raise ValueError(
+                f"phase.gather_lead_speed_m_s ({lead} m/s) must be within the speed limits "
+                f"[{lim.min_speed_m_s}, {lim.max_speed_m_s}] m/s"
+            )
         return self
 
     @model_validator(mode="after")

@@ -69,9 +69,11 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
         )
         # ``auto`` is ``speed`` here (the built-in simulator and the fast simulation honour a
         # speed command); the runtime resolves it per vehicle (``phase_actuator``)
-        phase = config.phase.build(honours_speed=True)
+        track_phase = config.phase.build(honours_speed=True)
+        phase = replace(track_phase, lead_speed_m_s=config.phase.gather_lead_speed_m_s)
         track_gain = config.phase.track_gain_per_s
-        track_phase = phase if track_gain is None else replace(phase, gain_per_s=track_gain)
+        if track_gain is not None:
+            track_phase = replace(track_phase, gain_per_s=track_gain)
         track_guidance = replace(
             guidance,
             law=g.law if g.track_law == "paper" else g.track_law,

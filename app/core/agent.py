@@ -166,6 +166,11 @@ class PhaseParams:
     it stays on r_d, and its polar angles swing by up to sqrt(3) v_t / s rad about 2 pi / 3 (for
     three), which no vehicle at a fixed speed on one circle can avoid.
 
+    ``lead_speed_m_s`` (speed actuator only): the vehicle furthest behind its seat (the largest
+    error) flies this speed and every other one the law's speed for its error minus that
+    largest one, so that the team closes its gaps at the lead speed instead of about cruise
+    (None: about cruise, the paper's law).
+
     ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
     too: at ground speed s on a circle around a target moving at v_t the relative speed along
     the orbit is u = -v_t . t_hat + sqrt(s^2 - (v_t . r_hat)^2), so the polar rate u / r is the
@@ -182,8 +187,15 @@ class PhaseParams:
     radius_rate_m_s: float = 1.0
     radius_step_m: float = 0.5
     radius_phase: RadiusPhase = "orbit_time"
+    lead_speed_m_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.lead_speed_m_s is not None and not (
+            math.isfinite(self.lead_speed_m_s) and self.lead_speed_m_s > 0.0
+        ):
+            raise ValueError(
+                f"PhaseParams.lead_speed_m_s must be finite and > 0: {self.lead_speed_m_s}"
+            )
         if self.law not in ("paper", "frew", "none"):
             raise ValueError(f"PhaseParams.law must be paper|frew|none, got {self.law!r}")
         if not (math.isfinite(self.gain_per_s) and self.gain_per_s >= 0.0):
@@ -496,15 +508,18 @@ def _speed_command(
         if j == params.index:
             own_r = r
         phases.append(theta)
-    if ph.law == "paper":
-        error = phase.seat_errors(phases)[params.index]
-    else:
-        error = phase.neighbour_errors(phases)[params.index]
+    errors = phase.seat_errors(phases) if ph.law == "paper" else phase.neighbour_errors(phases)
+    error, base = errors[params.index], env.cruise_speed_m_s
+    if ph.lead_speed_m_s is not None and ph.actuator == "speed":
+        # the vehicle furthest behind its seat flies the lead speed and the others slower by
+        # the law: the team closes its gaps at the lead speed (not about cruise); the radius
+        # actuator's wanted speed stays about cruise (it holds its speed)
+        error, base = error - max(errors), ph.lead_speed_m_s
     return phase.phase_speed(
         error,
         own_r,
         g.radius_m,
-        env.cruise_speed_m_s,
+        base,
         ph.gain_per_s,
         env.min_speed_m_s,
         env.max_speed_m_s,

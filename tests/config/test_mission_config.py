@@ -194,6 +194,20 @@ def test_the_receding_horizon_planner_is_a_track_stage_setting():
             validate_config(raw, MissionConfig, source="m.toml")
 
 
+def test_the_gather_lead_speed_reaches_gather_and_adjust_only_and_stays_in_the_envelope() -> None:
+    for agent in build_plan(load_config("hil", MissionConfig)).agents:
+        assert agent.agent.phase.lead_speed_m_s is None  # off by default
+    raw = {**BASE, "phase": {**BASE["phase"], "gather_lead_speed_m_s": 17.0}}
+    for agent in build_plan(validate_config(raw, MissionConfig, source="m.toml")).agents:
+        assert agent.agent.phase.lead_speed_m_s == 17.0
+        assert agent.track is not None
+        assert agent.track.phase.lead_speed_m_s is None
+        assert agent.track.phase.gain_per_s == BASE["phase"]["track_gain_per_s"]
+    raw = {**BASE, "phase": {**BASE["phase"], "gather_lead_speed_m_s": 19.0}}
+    with pytest.raises(ConfigError, match="gather_lead_speed_m_s"):
+        validate_config(raw, MissionConfig, source="m.toml")
+
+
 def test_the_ground_fuses_and_allocates_at_the_missions_periods():
     default = build_plan(load_config("hil", MissionConfig)).ground
     assert (default.fuse_period_s, default.feedback_period_s) == (0.2, 1.0)

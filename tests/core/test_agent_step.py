@@ -142,6 +142,40 @@ def test_phase_keeping_speeds_up_the_vehicle_behind_its_seat():
     assert speeds[1] == pytest.approx(20.0 - 0.05 * math.radians(3.333) * 400.0, abs=0.01)
 
 
+def test_a_lead_speed_flies_the_vehicle_furthest_behind_at_it_and_the_rest_slower() -> None:
+    """With ``lead_speed_m_s`` the law's speeds are shifted so that the largest error (the
+    vehicle furthest behind its seat) flies the lead speed; the gaps close at the same rate as
+    about cruise, and a spaced team flies the lead speed."""
+    pos = [(400 * math.cos(math.radians(a)), 400 * math.sin(math.radians(a))) for a in (0, 30, 50)]
+
+    def speeds(phase: PhaseParams, angles: list[tuple[float, float]]) -> list[float]:
+        out = []
+        for i, (e, n) in enumerate(angles):
+            params = AgentParams(i, ENV, GuidanceParams(400.0), phase)
+            inputs = _inputs(e, n, -math.atan2(n, e), 20.0, team=tuple(angles))
+            out.append(agent_step(AgentState(), inputs, params)[1].speed_m_s)
+        return out
+
+    about_cruise = speeds(PhaseParams("paper", 0.005), pos)
+    led = speeds(PhaseParams("paper", 0.005, lead_speed_m_s=24.0), pos)
+    assert led[2] == pytest.approx(24.0)  # vehicle 2 is furthest behind its seat
+    assert led[0] < led[1] < 24.0
+    # the differences between the vehicles are the law's, only shifted
+    for a, b in ((0, 1), (1, 2)):
+        assert led[b] - led[a] == pytest.approx(about_cruise[b] - about_cruise[a], abs=1e-9)
+    spaced = [
+        (400 * math.cos(math.radians(a)), 400 * math.sin(math.radians(a))) for a in (0, 120, 240)
+    ]
+    assert speeds(PhaseParams("paper", 0.005, lead_speed_m_s=24.0), spaced) == pytest.approx(
+        [24.0] * 3
+    )
+    # the radius actuator holds its speed: no lead
+    radius = PhaseParams("paper", 0.005, actuator="radius", lead_speed_m_s=24.0)
+    assert speeds(radius, pos) == [20.0, 20.0, 20.0]
+    with pytest.raises(ValueError, match="lead_speed_m_s"):
+        PhaseParams("paper", lead_speed_m_s=math.nan)
+
+
 def test_moving_target_speed_is_relative_to_the_target():
     target = TargetInfo(0.0, 0.0, 5.0, 0.0)
     _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), PARAMS)
