@@ -20,6 +20,9 @@ all on the same seeds:
 - with ``--horizon``, also +horizon: +latency with the receding-horizon planner
   (``planner="horizon"``, ``app.core.guidance.horizon``: the team's course rates and speeds
   planned 40 s ahead on the estimate every 2 s), printed with the agents' CPU per run;
+- with ``--lead-speed V``, also +lead: +latency with gather and adjust led at V m/s
+  (``PhaseParams.lead_speed_m_s``: the vehicle furthest behind its seat flies V, the others
+  slower by the phase law), which changes the formation time and the state the track starts in;
 - with ``--truth``, also +truth: +latency with every agent steering on the true target
   (``MissionSimSetup.truth_fed``), what guidance and phase keeping give with perfect knowledge
   of the target, which separates their share of the errors from the estimation's.
@@ -114,7 +117,21 @@ def mean_figures(runs: list[dict], labels: tuple[str, ...]) -> dict[str, dict[st
     return out
 
 
-def variants(plan: MissionPlan, lag: float, horizon: bool = False) -> dict[str, MissionPlan]:
+def with_lead_speed(plan: MissionPlan, lead_speed_m_s: float) -> MissionPlan:
+    """The plan with gather's and adjust's phase keeping led at ``lead_speed_m_s``
+    (``PhaseParams.lead_speed_m_s``, config ``phase.gather_lead_speed_m_s``)."""
+    agents = tuple(
+        replace(
+            a, agent=replace(a.agent, phase=replace(a.agent.phase, lead_speed_m_s=lead_speed_m_s))
+        )
+        for a in plan.agents
+    )
+    return replace(plan, agents=agents)
+
+
+def variants(
+    plan: MissionPlan, lag: float, horizon: bool = False, lead_speed_m_s: float | None = None
+) -> dict[str, MissionPlan]:
     base = plan.agents[0].agent.guidance
     planned: dict[str, Any] = {"law": "frew", "orbit_plan": "ellipse", "speed_cap": False}
     out = {
@@ -126,6 +143,8 @@ def variants(plan: MissionPlan, lag: float, horizon: bool = False) -> dict[str, 
     }
     if horizon:
         out["+horizon"] = variant(plan, lag, HOLD_S, **(planned | {"planner": "horizon"}))
+    if lead_speed_m_s is not None:
+        out["+lead"] = with_lead_speed(out["+latency"], lead_speed_m_s)
     return out
 
 
@@ -139,6 +158,12 @@ def main() -> None:
     )
     parser.add_argument(
         "--horizon", action="store_true", help="also fly +latency with the receding horizon"
+    )
+    parser.add_argument(
+        "--lead-speed",
+        type=float,
+        metavar="V",
+        help="also fly +latency with gather and adjust led at V m/s (+lead)",
     )
     parser.add_argument(
         "--vary-command",
@@ -156,7 +181,7 @@ def main() -> None:
         moved = config.model_copy(
             update={"tracking_command_s": config.tracking_command_s + args.vary_command * seed}
         )
-        plans = variants(build_plan(moved), lag, args.horizon)
+        plans = variants(build_plan(moved), lag, args.horizon, args.lead_speed)
         for name, p in plans.items():
             runs.setdefault(name, []).append(fly(p, seed, args.latency_ticks))
         if args.truth:
