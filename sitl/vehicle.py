@@ -84,6 +84,11 @@ PX4_STREAMS: Final[StreamTable] = {
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: -1.0,  # on request (MAVSDK attitude_quaternion)
     mavlink.MAVLINK_MSG_ID_WIND_COV: 1.0,  # mavlink_main.cpp: 0.5-1 Hz in the normal modes
+    # streams real PX4 has (fast on an onboard link) and this simulator does not send: their
+    # intervals are taken, as PX4 takes them, and nothing is sent
+    mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: -1.0,
+    mavlink.MAVLINK_MSG_ID_ODOMETRY: -1.0,
+    mavlink.MAVLINK_MSG_ID_RC_CHANNELS: -1.0,
 }
 #: ArduPilot's WIND (ardupilotmega, not in common)
 MSG_ID_WIND: Final = 168

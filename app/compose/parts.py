@@ -15,6 +15,7 @@ from typing import Any
 from app.adapters.eventlog import EventLog
 from app.adapters.observations_log import ObservationLog, observations_file
 from app.adapters.tlog import TlogRecorder
+from app.adapters.vehicle.autopilots.px4 import px4_mission_rates
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
 from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
@@ -86,6 +87,9 @@ def link_config(plan: MissionPlan, builtin: bool) -> LinkConfig:
         arduplane_turn_learning=cfg.link.arduplane_turn_learning,
         arduplane_speed_learning=cfg.link.arduplane_speed_learning,
         px4_airspeed_via_trim=cfg.link.px4_airspeed_via_trim,
+        px4_telemetry_rates_hz=(
+            None if (rate := cfg.link.px4_telemetry_rate_hz) is None else px4_mission_rates(rate)
+        ),
         timesync_period_s=cfg.link.timesync_period_s,
     )
 

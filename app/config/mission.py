@@ -190,6 +190,11 @@ class LinkSettings(StrictModel):
     ``auto`` phase actuator is ``speed``. Off by default: every change is a parameter write
     (at most one per 5 s, 0.5 m/s deadband), the trim is restored at the end, and an operator
     must accept PX4's cruise airspeed being moved (docs/vehicle-link.md).
+    ``px4_telemetry_rate_hz``: on PX4, ask for what the link reads (GLOBAL_POSITION_INT,
+    LOCAL_POSITION_NED, ATTITUDE) at this rate and slow PX4's fast streams it never reads
+    (HIGHRES_IMU, ATTITUDE_QUATERNION, ODOMETRY, RC_CHANNELS) to 1 Hz, all put back at PX4's own
+    rates at the end: PX4's offboard link streams about 410 messages a second, which the
+    links decode and record for nothing (docs/vehicle-link.md). None: PX4's own rates.
     ``control_rate_hz``: each agent steers at most this often (vehicle time); telemetry
     arriving faster (PX4 streams position at 50 Hz) is coalesced, the frames between counted
     as ``frames_coalesced``, so an agent's CPU is that of the control rate. 0: steer on every
@@ -217,6 +222,7 @@ class LinkSettings(StrictModel):
     arduplane_turn_learning: bool = True
     arduplane_speed_learning: bool = False
     px4_airspeed_via_trim: bool = False
+    px4_telemetry_rate_hz: Positive | None = 10.0
     control_rate_hz: NonNegative = 10.0
     timesync_period_s: Annotated[float, Field(ge=0.0, le=60.0, allow_inf_nan=False)] = 1.0
 

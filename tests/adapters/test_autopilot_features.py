@@ -2,6 +2,7 @@
 the offboard acceleration, which adapters fly the commanded speed, the telemetry rates asked
 with SET_MESSAGE_INTERVAL, and the parameters changed before take-off and restored after."""
 
+import json
 import math
 from dataclasses import replace
 
@@ -18,6 +19,7 @@ from app.adapters.vehicle.autopilots.px4 import (
     PX4_TELEMETRY_RATES_HZ,
     Px4FixedWingAdapter,
     normal_acceleration_ned,
+    px4_mission_rates,
 )
 from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.core.plant import VehicleEnvelope
@@ -40,7 +42,8 @@ PX4_STATE = VehicleState(
 
 
 def px4(**changes):
-    offboard, commands = OffboardRecorder(), CommandRecorder()
+    offboard = OffboardRecorder()
+    commands = changes.pop("commands", None) or CommandRecorder()
     params = changes.pop("params", None) or ParamRecorder(STOCK_PX4)
     adapter = Px4FixedWingAdapter(
         vehicle_id=3, offboard=offboard, commands=commands, params=params, limits=LIMITS, **changes
@@ -280,6 +283,53 @@ async def test_px4_asks_for_no_rates_unless_told_and_for_position_when_told():
     adapter, _, commands, _ = px4(telemetry_rates_hz=PX4_TELEMETRY_RATES_HZ)
     await adapter.prepare()
     assert intervals(commands) == [(33, 100000.0, 0.0), (32, 100000.0, 0.0)]
+
+
+class RefusingCommands(CommandRecorder):
+    """Acks every command, but refuses SET_MESSAGE_INTERVAL for one message id."""
+
+    def __init__(self, refused_id: int) -> None:
+        super().__init__()
+        self.refused_id = refused_id
+
+    async def send_command(self, command):
+        fields = json.loads(command.fields_json)
+        ack = await super().send_command(command)
+        if fields["command"] == 511 and int(fields["param1"]) == self.refused_id:
+            refused = {"command": 511, "result": mavlink.MAV_RESULT_FAILED}
+            return type(ack)(message_name="COMMAND_ACK", fields_json=json.dumps(refused))
+        return ack
+
+
+async def test_px4_mission_rates_slow_what_is_read_and_what_is_not_and_are_put_back():
+    rates = px4_mission_rates(10.0)
+    assert rates == {
+        "GLOBAL_POSITION_INT": 10.0,
+        "LOCAL_POSITION_NED": 10.0,
+        "ATTITUDE": 10.0,
+        "HIGHRES_IMU": 1.0,
+        "ATTITUDE_QUATERNION": 1.0,
+        "ODOMETRY": 1.0,
+        "RC_CHANNELS": 1.0,
+    }
+    odometry = mavlink.MAVLINK_MSG_ID_ODOMETRY
+    commands = RefusingCommands(odometry)
+    adapter, _, _, _ = px4(telemetry_rates_hz=rates, commands=commands)
+    await adapter.prepare()
+    asked = intervals(commands)
+    assert asked[:3] == [(33, 100000.0, 0.0), (32, 100000.0, 0.0), (30, 100000.0, 0.0)]
+    assert [a[1] for a in asked[3:]] == [1e6] * 4
+    commands.sent.clear()
+    await adapter.restore_params()
+    # every accepted one back at PX4's own rate (interval 0); the refused one was never moved
+    put_back = intervals(commands)
+    assert {a[0] for a in put_back} == {33, 32, 30, 105, 31, 65}
+    assert all(a[1] == 0.0 for a in put_back)
+    commands.sent.clear()
+    await adapter.restore_params()
+    assert intervals(commands) == []  # once
+    with pytest.raises(ValueError, match="telemetry rate"):
+        px4_mission_rates(0.0)
 
 
 # ---- the GCS failsafe: id first, our heartbeat counted, then the failsafe ----------------------

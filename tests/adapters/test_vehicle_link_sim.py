@@ -11,6 +11,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
+from app.adapters.vehicle.autopilots.px4 import px4_mission_rates
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig, MavsdkVehicleLink
 from app.core.frames import wrap_pi
@@ -414,6 +415,37 @@ async def test_px4_adapter_sets_the_offboard_loss_action_to_hold_before_take_off
             assert link.autopilot_name == "px4-fixed-wing"
             assert px4_of(sim.vehicles[0]).failsafe_action == "hold"
             assert sim.truth().vehicles[0].armed is False
+
+
+async def test_px4_is_asked_for_the_missions_rates_and_given_its_own_back_at_the_end() -> None:
+    """PX4's onboard link streams position at 50 Hz; with ``px4_telemetry_rates_hz`` the link
+    asks for what it reads at 10 Hz and the fast streams it never reads at 1 Hz, over MAVLink,
+    and puts every one back at the autopilot's own rate when it closes."""
+    config = sim_config(1, speedup=SPEEDUP, telemetry_rate_hz=50.0)
+    rates = LinkConfig(
+        LIMITS, px4_offboard_loss_action=None, px4_telemetry_rates_hz=px4_mission_rates(10.0)
+    )
+    gpi, imu = mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_HIGHRES_IMU
+    async with asyncio.timeout(40.0), running_sim(config) as sim:
+        vehicle = sim.vehicles[0]
+        assert vehicle.stream_interval_s(gpi) == pytest.approx(0.02)
+        async with hub_of(sim) as hub, hub.link(1, rates) as link:
+            await link.wait_ready(10.0)
+            assert link.autopilot_name == "px4-fixed-wing"
+            assert vehicle.stream_interval_s(gpi) == pytest.approx(0.1)
+            assert vehicle.stream_interval_s(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED) == (
+                pytest.approx(0.1)
+            )
+            assert vehicle.stream_interval_s(imu) == pytest.approx(1.0)
+            frames = []
+            async with aclosing(link.telemetry()) as stream:
+                async for frame in stream:
+                    frames.append(frame.t_s)
+                    if frame.t_s - frames[0] >= 3.0:
+                        break
+            assert (len(frames) - 1) / (frames[-1] - frames[0]) == pytest.approx(10.0, rel=0.15)
+        assert vehicle.stream_interval_s(gpi) == pytest.approx(0.02)  # PX4's own again
+        assert vehicle.stream_interval_s(imu) < 0.0  # off, as it was (the simulator has none)
 
 
 async def test_px4_whose_airspeed_range_misses_the_missions_speeds_is_refused_before_take_off():

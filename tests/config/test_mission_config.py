@@ -232,6 +232,24 @@ def test_steering_px4s_airspeed_through_its_trim_is_opt_in_and_reaches_the_link(
     assert config.px4_airspeed_via_trim
 
 
+def test_px4_is_asked_for_the_mission_rates_unless_told_to_keep_its_own() -> None:
+    from app.adapters.vehicle.autopilots.px4 import px4_mission_rates
+    from app.compose.parts import link_config
+
+    raw = load_config("px4-sitl", MissionConfig).model_dump()
+    default = link_config(build_plan(MissionConfig.model_validate(raw)), False)
+    assert default.px4_telemetry_rates_hz == px4_mission_rates(10.0)
+    raw["link"]["px4_telemetry_rate_hz"] = 5.0
+    slower = link_config(build_plan(MissionConfig.model_validate(raw)), False)
+    assert slower.px4_telemetry_rates_hz == px4_mission_rates(5.0)
+    raw["link"]["px4_telemetry_rate_hz"] = None
+    own = link_config(build_plan(MissionConfig.model_validate(raw)), False)
+    assert own.px4_telemetry_rates_hz is None
+    raw["link"]["px4_telemetry_rate_hz"] = 0.0
+    with pytest.raises(ValidationError, match="px4_telemetry_rate_hz"):
+        MissionConfig.model_validate(raw)
+
+
 def test_link_delays_reach_the_simulator_and_timesync_the_links():
     from app.compose.parts import link_config
 

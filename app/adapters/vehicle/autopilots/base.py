@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal, Protocol
 
@@ -317,6 +317,35 @@ def message_interval_command(
         mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
         (float(message_id), round(1e6 / rate_hz), 0.0),
     )
+
+
+def default_interval_command(
+    target_system: int, target_component: int, message_id: int
+) -> MavlinkMessage:
+    """MAV_CMD_SET_MESSAGE_INTERVAL with interval 0: the message back at the autopilot's own
+    rate (PX4 mavlink_receiver.cpp ``set_message_interval``, ArduPilot GCS_Common.cpp)."""
+    return command_long(
+        target_system,
+        target_component,
+        mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+        (float(message_id), 0.0, 0.0),
+    )
+
+
+async def restore_message_rates(
+    port: CommandPort, vehicle_id: int, target_component: int, names: Iterable[str]
+) -> None:
+    """Put every message of ``names`` back at the autopilot's own rate; a refusal or a lost
+    answer is logged, not raised (the mission is over, the vehicle flies on)."""
+    for name in names:
+        message_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+        command = default_interval_command(vehicle_id, target_component, message_id)
+        try:
+            await send_checked_command(port, command, vehicle_id, f"{name} at its own rate")
+        except LinkError as exc:
+            log.warning(
+                "vehicle %d: %s not put back at the autopilot's own rate: %s", vehicle_id, name, exc
+            )
 
 
 def check_message_rates(rates_hz: Mapping[str, float]) -> None:

@@ -29,6 +29,7 @@ from app.adapters.vehicle.autopilots.base import (
     command_long,
     offboard_call,
     request_message_rates,
+    restore_message_rates,
     send_checked_command,
 )
 from app.adapters.vehicle.autopilots.limits import SetpointLimits
@@ -139,10 +140,13 @@ class Px4FixedWingAdapter(OffboardControl):
     Every parameter changed is written back by ``restore_params``.
 
     ``telemetry_rates_hz`` (None: nothing asked): messages to request by
-    MAV_CMD_SET_MESSAGE_INTERVAL in ``prepare``. PX4 SITL's offboard port (UDP 14540, an
-    ``onboard`` mode link) already streams GLOBAL_POSITION_INT at 50 Hz and LOCAL_POSITION_NED at
-    30 Hz (mavlink_main.cpp ``configure_streams_to_default``); a ``normal`` mode link, such as a
-    telemetry radio, streams them at 5 and 1 Hz: set ``PX4_TELEMETRY_RATES_HZ`` there.
+    MAV_CMD_SET_MESSAGE_INTERVAL in ``prepare``, put back at PX4's own rates (interval 0) by
+    ``restore_params``. PX4 SITL's offboard port (UDP 14540, an ``onboard`` mode link) streams
+    GLOBAL_POSITION_INT at 50 Hz, LOCAL_POSITION_NED at 30 Hz and ATTITUDE at 100 Hz
+    (mavlink_main.cpp ``configure_streams_to_default``), far faster than a mission steers:
+    ``px4_mission_rates`` slows them and the fast streams the link never reads. A ``normal``
+    mode link, such as a telemetry radio, streams position at 5 and 1 Hz:
+    ``PX4_TELEMETRY_RATES_HZ`` or ``px4_mission_rates`` raises it.
     """
 
     vehicle_id: int
@@ -166,6 +170,7 @@ class Px4FixedWingAdapter(OffboardControl):
     _trim_sent_t_s: float | None = field(default=None, init=False)
     _trim_original: float | None = field(default=None, init=False)
     _journal: ParamJournal = field(init=False)
+    _rates_set: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
         if self.telemetry_rates_hz is not None:
@@ -189,9 +194,10 @@ class Px4FixedWingAdapter(OffboardControl):
 
     async def prepare(self) -> None:
         if self.telemetry_rates_hz:
-            await request_message_rates(
+            accepted = await request_message_rates(
                 self.commands, self.vehicle_id, self.target_component, self.telemetry_rates_hz
             )
+            self._rates_set = tuple(name for name, ok in accepted.items() if ok)
         if self.airspeed_via_trim_param:
             try:
                 self._trim_original = await self.params.get_param_float(FW_AIRSPD_TRIM)
@@ -236,7 +242,14 @@ class Px4FixedWingAdapter(OffboardControl):
             ) from exc
 
     async def restore_params(self) -> None:
+        """Write back the parameters ``prepare`` (and the trim path) changed, and put every
+        stream it set back at PX4's own rate."""
         await self._journal.restore(self.params)
+        if self._rates_set:
+            await restore_message_rates(
+                self.commands, self.vehicle_id, self.target_component, self._rates_set
+            )
+            self._rates_set = ()
 
     def setpoint(
         self, setpoint: CourseSpeedCommand, altitude_m: float, state: VehicleState
@@ -379,3 +392,22 @@ PX4_TELEMETRY_RATES_HZ: Final[Mapping[str, float]] = {
     "GLOBAL_POSITION_INT": 10.0,
     "LOCAL_POSITION_NED": 10.0,
 }
+#: what the link reads of PX4 and PX4's ``onboard`` link streams fast (mavlink_main.cpp
+#: ``configure_streams_to_default``, v1.16: ATTITUDE 100 Hz, GLOBAL_POSITION_INT, HIGHRES_IMU
+#: and ATTITUDE_QUATERNION 50, LOCAL_POSITION_NED and ODOMETRY 30, RC_CHANNELS 20)
+PX4_READ_STREAMS: Final = ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE")
+#: the fast ``onboard`` streams the link never reads
+PX4_UNREAD_FAST_STREAMS: Final = ("HIGHRES_IMU", "ATTITUDE_QUATERNION", "ODOMETRY", "RC_CHANNELS")
+#: the rate the unread fast streams are slowed to (Hz)
+PX4_UNREAD_STREAM_RATE_HZ: Final = 1.0
+
+
+def px4_mission_rates(rate_hz: float) -> dict[str, float]:
+    """The streams to ask of PX4 for a mission steered at ``rate_hz``: what the link reads at
+    that rate, PX4's fast streams it never reads at 1 Hz (about 410 messages a second of an
+    ``onboard`` link down to about 100 at 10 Hz)."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        raise ValueError(f"the telemetry rate must be finite and > 0 Hz, got {rate_hz!r}")
+    rates = dict.fromkeys(PX4_READ_STREAMS, rate_hz)
+    rates.update(dict.fromkeys(PX4_UNREAD_FAST_STREAMS, PX4_UNREAD_STREAM_RATE_HZ))
+    return rates

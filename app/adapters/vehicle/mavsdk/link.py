@@ -19,7 +19,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from contextlib import AsyncExitStack, aclosing
 from dataclasses import dataclass, field, replace
 from types import TracebackType
@@ -101,6 +101,9 @@ class LinkConfig:
     ``px4_airspeed_via_trim``: on PX4, fly the commanded airspeed by writing FW_AIRSPD_TRIM
     (``Px4FixedWingAdapter.airspeed_via_trim_param``; off by default: a parameter write per
     change, at most one per 5 s).
+    ``px4_telemetry_rates_hz``: on PX4, the message rates to ask for (by MAVLink name; put
+    back at PX4's own rates at the end; None: PX4's own rates, 50 Hz position on an onboard
+    link); ``autopilots.px4.px4_mission_rates``.
     ``heartbeat_timeout_s``: when MAVSDK still reports a generic autopilot at connection (it
     found the vehicle by another message before its first HEARTBEAT: ArduPilot sends HEARTBEAT
     at 1 Hz and streams faster), how long to wait for the autopilot's HEARTBEAT before choosing
@@ -130,6 +133,7 @@ class LinkConfig:
     arduplane_turn_learning: bool = True
     arduplane_speed_learning: bool = False
     px4_airspeed_via_trim: bool = False
+    px4_telemetry_rates_hz: Mapping[str, float] | None = None
     airborne_altitude_m: float = 5.0
     hold_on_exit: bool = True
     queue_size: int = 256
@@ -411,6 +415,7 @@ class MavsdkVehicleLink:
                 target_component=self._config.autopilot_component_id,
                 offboard_loss_action=self._config.px4_offboard_loss_action,
                 airspeed_via_trim_param=self._config.px4_airspeed_via_trim,
+                telemetry_rates_hz=self._config.px4_telemetry_rates_hz,
             )
         if name == "arduplane":
             return ArduPlaneAdapter(
