@@ -825,6 +825,10 @@ class ArduPlaneAutopilot:
         assert isinstance(v.mode, ArduPlaneMode), v.mode
         return heartbeat(v.mode, v.armed, v.in_air, self.gcs_failsafe_active)
 
+    def timesync_answer(self, tc1: int, ts1: int) -> mavlink.MAVLink_message:
+        # GCS_Common.cpp handle_timesync: the answer's target fields are 0 (a broadcast)
+        return mavlink.MAVLink_timesync_message(tc1, ts1)
+
     def autopilot_version(self, v: SimVehicle) -> mavlink.MAVLink_message:
         return mavlink.MAVLink_autopilot_version_message(
             ARDUPILOT_CAPABILITIES, ARDUPLANE_VERSION, 0, 0, 0,

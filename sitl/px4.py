@@ -545,5 +545,26 @@ class Px4Autopilot:
     def heartbeat(self, v: SimVehicle) -> mavlink.MAVLink_message:
         return telemetry.heartbeat(v.mode.custom_mode, v.armed)
 
+    def timesync_answer(self, tc1: int, ts1: int) -> mavlink.MAVLink_message:
+        return Px4TimesyncAnswer(tc1, ts1)
+
     def autopilot_version(self, v: SimVehicle) -> mavlink.MAVLink_message:
         return telemetry.autopilot_version(v.system_id)
+
+
+#: the target bytes real PX4 v1.16 SITL's answers carried (uninitialised stack; seen in every
+#: answer of a real run's tlog: 88, 28)
+PX4_TIMESYNC_TARGET: Final = (88, 28)
+
+
+class Px4TimesyncAnswer(mavlink.MAVLink_timesync_message):  # type: ignore[misc]
+    """PX4 v1.16's answer to a TIMESYNC request: mavlink_timesync.cpp ``handle_message`` fills
+    only tc1 and ts1 of a ``mavlink_timesync_t`` on the stack, so the MAVLink 2 extension
+    fields target_system / target_component go out as whatever was there (88, 28 in a real
+    run), and a MAVLink library that knows them (MAVSDK's) takes the answer for another
+    system's and drops it. pymavlink's dialect here has no such fields, so they are appended
+    to the payload by hand."""
+
+    def pack(self, mav: mavlink.MAVLink, force_mavlink1: bool = False) -> bytes:
+        payload = self.unpacker.pack(self.tc1, self.ts1) + bytes(PX4_TIMESYNC_TARGET)
+        return bytes(self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1))

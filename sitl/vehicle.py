@@ -196,6 +196,10 @@ class Autopilot(Protocol):
 
     def autopilot_version(self, v: "SimVehicle") -> mavlink.MAVLink_message: ...
 
+    def timesync_answer(self, tc1: int, ts1: int) -> mavlink.MAVLink_message:
+        """Its answer to a TIMESYNC request (tc1 its boot time, ns; ts1 the request's)."""
+        ...
+
 
 @dataclass(frozen=True, slots=True)
 class VehicleTruth:
@@ -514,7 +518,7 @@ class SimVehicle:
             return [(AUTOPILOT_COMPONENT, reply)]
         if msg_id == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0:
             tc1 = round(self.boot_time_s(t_s) * 1e9)
-            return [(AUTOPILOT_COMPONENT, mavlink.MAVLink_timesync_message(tc1, msg.ts1))]
+            return [(AUTOPILOT_COMPONENT, self.autopilot.timesync_answer(tc1, msg.ts1))]
         return self.autopilot.handle(self, msg, t_s, wall_s)
 
     def _on_command(

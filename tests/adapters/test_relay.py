@@ -11,7 +11,12 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.tlog import TlogRecorder
-from app.adapters.vehicle.mavsdk.packets import TARGET_OFFSETS, split_packets, split_stream
+from app.adapters.vehicle.mavsdk.packets import (
+    TARGET_OFFSETS,
+    broadcast_timesync_answers,
+    split_packets,
+    split_stream,
+)
 from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
 from app.adapters.vehicle.mavsdk.urls import (
     UdpEndpoint,
@@ -19,6 +24,7 @@ from app.adapters.vehicle.mavsdk.urls import (
     udp_endpoint_of_url,
 )
 from app.errors import ConfigError, LinkError
+from sitl.px4 import Px4TimesyncAnswer
 
 APP_ID, GCS_ID, VEHICLE_ID = 245, 255, 3
 
@@ -311,6 +317,38 @@ async def test_garbage_from_the_vehicle_is_passed_on_but_not_recorded(tmp_path):
 
 
 # --- a TCP vehicle (ArduPilot SITL's 5760) --------------------------------------------------
+
+
+def test_px4s_timesync_answers_are_passed_on_as_broadcasts_and_nothing_else_is_touched() -> None:
+    """PX4 v1.16 answers TIMESYNC with uninitialised target bytes (88, 28 in a real run), which
+    MAVSDK takes for another system's: the relay cuts them, so the answer is a broadcast with
+    a good checksum and the same tc1 / ts1; requests, answers without target bytes, signed
+    packets and the other packets of the datagram stay byte for byte."""
+    answer = pack(Px4TimesyncAnswer(123_000_000, 987_654_321), VEHICLE_ID)
+    assert answer[1] == 18  # the payload carries the two target bytes
+    beat = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
+    data = beat + answer + beat
+    packets, _ = split_packets(data)
+    out = broadcast_timesync_answers(data, packets)
+    assert out != data
+    assert out[: len(beat)] == beat
+    assert out[-len(beat) :] == beat
+    fixed = out[len(beat) : -len(beat)]
+    assert fixed[1] == 16  # no target bytes: a broadcast
+    (msg,) = decode(fixed)  # pymavlink checks the CRC
+    assert (msg.get_type(), msg.tc1, msg.ts1) == ("TIMESYNC", 123_000_000, 987_654_321)
+    assert msg.get_srcSystem() == VEHICLE_ID
+    # what MAVSDK decodes with the extension fields: a 16-byte payload reads target 0
+    plain = pack(mavlink.MAVLink_timesync_message(5, 6), VEHICLE_ID)  # ArduPlane's answer
+    request = pack(Px4TimesyncAnswer(0, 42), VEHICLE_ID)  # tc1 0: a request, even with bytes
+    for untouched in (plain, request):
+        unchanged, _ = split_packets(untouched)
+        assert broadcast_timesync_answers(untouched, unchanged) is untouched
+    signed = bytearray(answer)
+    signed[2] |= 0x01
+    signed_bytes = bytes(signed) + bytes(13)
+    packets, _ = split_packets(signed_bytes)
+    assert broadcast_timesync_answers(signed_bytes, packets) is signed_bytes
 
 
 def test_split_stream_keeps_a_packet_cut_short_for_the_next_read():

@@ -3,14 +3,22 @@ and the frames' stamps moved back by it: the pure estimator, then over real UDP 
 built-in simulator with a delayed link."""
 
 import asyncio
+import contextlib
 import dataclasses
 import math
+from collections.abc import AsyncIterator
 from contextlib import aclosing
 
 import pytest
 
+from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
+from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
 from app.adapters.vehicle.mavsdk.timesync import LinkDelay, follow
+from app.adapters.vehicle.mavsdk.urls import udp_endpoint_of_url
+from app.runtime.ports.clock import MissionClock
+from app.runtime.ports.vehicle import GeodeticOrigin
+from sitl.server import SimulatorServer
 from tests.adapters.test_vehicle_link_sim import LIMITS, hub_of
 from tests.support.sitl_fixtures import running_sim, sim_config
 
@@ -53,6 +61,23 @@ def test_the_correction_moves_by_at_most_a_step_per_frame():
 
 
 @pytest.mark.slow
+@contextlib.asynccontextmanager
+async def relayed_hub(sim: SimulatorServer) -> AsyncIterator[MavsdkHub]:
+    """A hub on the simulator's vehicles through one relay each, as ``standoff fly`` connects
+    (the relay passes PX4's TIMESYNC answers on as broadcasts), on the simulator's clock."""
+    clock = MissionClock(0.0, 1.0, lambda: sim.time_s)
+    c = sim.config
+    origin = GeodeticOrigin(c.origin_lat_deg, c.origin_lon_deg, c.origin_alt_m)
+    async with contextlib.AsyncExitStack() as stack:
+        urls = []
+        for i, vehicle in enumerate(sim.endpoints):
+            endpoint = udp_endpoint_of_url(vehicle.mavsdk_url)
+            assert endpoint is not None
+            relay = MavlinkRelay(endpoint, system_ids=frozenset({i + 1}))
+            urls.append((await stack.enter_async_context(relay)).app_url)
+        yield await stack.enter_async_context(MavsdkHub(urls, origin, mission_clock=clock))
+
+
 async def test_a_delayed_link_is_measured_and_its_frames_stamped_when_they_were_sampled():
     # vehicle 1 behind a 0.3 s radio (each way), vehicle 2 on loopback
     base = sim_config(2, speedup=5.0)
@@ -62,7 +87,7 @@ async def test_a_delayed_link_is_measured_and_its_frames_stamped_when_they_were_
     async with (
         asyncio.timeout(60.0),
         running_sim(config) as sim,
-        hub_of(sim) as hub,
+        relayed_hub(sim) as hub,
         hub.link(1, link_config) as slow,
         hub.link(2, link_config) as fast,
     ):
@@ -85,3 +110,25 @@ async def test_a_delayed_link_is_measured_and_its_frames_stamped_when_they_were_
     # stamped at arrival, both would be ~0 old; moved back, the slow link's are 0.3 s old
     assert ages["slow"] == pytest.approx(0.3, abs=0.06)
     assert ages["fast"] < 0.06
+
+
+async def test_px4s_timesync_answers_reach_the_link_through_the_relay() -> None:
+    """The built-in simulator's PX4 answers TIMESYNC as PX4 v1.16 does, with uninitialised
+    target bytes; MAVSDK drops such an answer as another system's, so on a direct connection
+    the link measures nothing, and through the mission's relay (which passes the answers on as
+    broadcasts) it measures the loopback's delay."""
+    config = sim_config(1, speedup=5.0)
+    link_config = LinkConfig(LIMITS, px4_offboard_loss_action=None, timesync_period_s=0.2)
+    async with asyncio.timeout(60.0), running_sim(config) as sim:
+        async with hub_of(sim) as hub, hub.link(1, link_config) as direct:
+            await direct.wait_ready(10.0)
+            assert direct.autopilot_name == "px4-fixed-wing"
+            await asyncio.sleep(3.0)
+            assert direct.counters.timesync_answers == 0
+        async with relayed_hub(sim) as hub, hub.link(1, link_config) as relayed:
+            await relayed.wait_ready(10.0)
+            await asyncio.sleep(3.0)
+            assert relayed.counters.timesync_answers >= 5
+            delay = relayed.counters.link_delay_s
+            assert delay is not None
+            assert 0.0 <= delay < 0.03

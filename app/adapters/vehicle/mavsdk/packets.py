@@ -148,3 +148,53 @@ def _target(data: bytes, payload: int, length: int, msg_id: int) -> int:
     if offset is None or offset >= length:
         return 0  # no target field, or cut off with the payload's trailing zeros
     return data[payload + offset]
+
+
+#: TIMESYNC: tc1, ts1 (int64 each), then MAVLink 2's extension target_system, target_component
+TIMESYNC_ID: Final = 111
+TIMESYNC_BASE_LEN: Final = 16
+#: CRC_EXTRA of TIMESYNC (extension fields do not change it)
+TIMESYNC_CRC_EXTRA: Final = dialect.MAVLink_timesync_message.crc_extra
+
+
+def broadcast_timesync_answers(data: bytes, packets: list[Packet]) -> bytes:
+    """``data`` with every unsigned MAVLink 2 TIMESYNC answer (tc1 != 0) that carries target
+    bytes turned into a broadcast (the target bytes cut, the CRC made again); ``data`` itself
+    when there is none.
+
+    PX4 v1.16 answers a TIMESYNC request with its target fields uninitialised
+    (mavlink_timesync.cpp fills only tc1 and ts1), so a MAVLink library that knows those
+    MAVLink 2 extension fields (MAVSDK's) takes the answer for another system's and drops it.
+    An answer goes back to whoever asked on the link anyway; as a broadcast it reaches them.
+    A signed packet is left as it is (its signature covers the bytes)."""
+    patched: list[tuple[Packet, bytes]] = []
+    for p in packets:
+        if p.msg_id != TIMESYNC_ID or data[p.start] != MAGIC_V2:
+            continue
+        if data[p.start + 2] & INCOMPAT_SIGNED or data[p.start + 1] <= TIMESYNC_BASE_LEN:
+            continue
+        payload = data[p.start + HEADER_V2 : p.start + HEADER_V2 + TIMESYNC_BASE_LEN]
+        if payload[:8] == bytes(8):  # tc1 == 0: a request, not an answer
+            continue
+        header = bytearray(data[p.start : p.start + HEADER_V2])
+        header[1] = TIMESYNC_BASE_LEN
+        patched.append((p, _with_crc(bytes(header) + payload, TIMESYNC_CRC_EXTRA)))
+    if not patched:
+        return data
+    out, at = bytearray(), 0
+    for p, packet in patched:
+        out += data[at : p.start] + packet
+        at = p.end
+    out += data[at:]
+    return bytes(out)
+
+
+def _with_crc(body: bytes, crc_extra: int) -> bytes:
+    """A MAVLink packet's bytes (magic to payload) with its X.25 checksum (over all but the
+    magic, then ``crc_extra``) appended."""
+    crc = 0xFFFF
+    for byte in (*body[1:], crc_extra):
+        tmp = byte ^ (crc & 0xFF)
+        tmp = (tmp ^ (tmp << 4)) & 0xFF
+        crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+    return body + struct.pack("<H", crc)

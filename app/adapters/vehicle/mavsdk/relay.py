@@ -9,7 +9,11 @@ companion computer's programs.
                                       '--> vehicle-<sysid>.tlog
 
 Every datagram is passed on as it came, at once, in the socket's callback: the relay adds no
-latency beyond one datagram forward and never re-encodes. Then each of its MAVLink packets is
+latency beyond one datagram forward and never re-encodes, with one exception: PX4 v1.16 answers
+TIMESYNC with its MAVLink 2 target fields uninitialised, and MAVSDK drops such an answer as
+another system's, so the relay passes a vehicle's TIMESYNC answer on as a broadcast
+(``packets.broadcast_timesync_answers``; counted in ``timesync_answers_broadcast``, recorded
+as it came). Then each of its MAVLink packets is
 appended to its vehicle's .tlog (``app.adapters.tlog.TlogRecorder``) with the wall-clock time
 of its receipt: what the vehicle sent (every component: autopilot, camera) and what was sent
 to it (by the app or the ground station).
@@ -43,7 +47,12 @@ from types import TracebackType
 from typing import Final, Self
 
 from app.adapters.tlog import TlogRecorder
-from app.adapters.vehicle.mavsdk.packets import Packet, split_packets, split_stream
+from app.adapters.vehicle.mavsdk.packets import (
+    Packet,
+    broadcast_timesync_answers,
+    split_packets,
+    split_stream,
+)
 from app.adapters.vehicle.mavsdk.urls import UdpEndpoint
 from app.errors import LinkError
 
@@ -76,6 +85,7 @@ class RelayCounters:
     gcs_refused: int = 0
     send_errors: int = 0
     faults: int = 0
+    timesync_answers_broadcast: int = 0
 
 
 class _Side(asyncio.DatagramProtocol):
@@ -369,13 +379,19 @@ class MavlinkRelay:
         try:
             for p in packets:
                 self._vehicle_ids.add(p.system_id)
-            # on to the app and the ground station first, then the log
+            # on to the app and the ground station first, then the log (as it came)
+            out = broadcast_timesync_answers(data, packets)
+            if out is not data:
+                self.counters.timesync_answers_broadcast += 1
+                out_packets, _ = split_packets(out)
+            else:
+                out_packets = packets
             if self._app_peer is None:
                 self.counters.no_app_yet += 1
             else:
-                self._send(self._app_t, (self._app_peer,), data, packets, self._app_ids)
+                self._send(self._app_t, (self._app_peer,), out, out_packets, self._app_ids)
             if self._gcs_t is not None and self._gcs_peers:
-                self._send(self._gcs_t, tuple(self._gcs_peers), data, packets, self._gcs_ids)
+                self._send(self._gcs_t, tuple(self._gcs_peers), out, out_packets, self._gcs_ids)
             if self._recorder is not None:
                 for p in packets:
                     self._recorder.write(p.system_id, now, data[p.start : p.end])
