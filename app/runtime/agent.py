@@ -363,7 +363,7 @@ class VehicleAgent:
             rate = c.course_rate_ff_rad_s
             # the airspeed that flies the ground speed in the estimated wind, where known
             speed = c.speed_m_s if c.airspeed_m_s is None else c.airspeed_m_s
-            if not all(math.isfinite(v) for v in (c.course_rad, speed, rate)):
+            if not all(math.isfinite(v) for v in (c.course_rad, speed, rate, c.field_course_rad)):
                 self.counters.commands_nonfinite += 1
                 self._fault(
                     "command_nonfinite", t, f"course {c.course_rad!r}, speed {c.speed_m_s!r}"
@@ -376,6 +376,7 @@ class VehicleAgent:
                         speed,
                         self._altitude(frame, c),
                         course_rate_rad_s=self._feed_forward(rate),
+                        path_course_rad=c.field_course_rad,
                     ),
                 )
         self.state, out = self._step(logic.Telemetry(t, own), self.params)

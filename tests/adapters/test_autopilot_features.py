@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
 from app.adapters.vehicle.autopilots.base import VehicleState
-from app.adapters.vehicle.autopilots.limits import SetpointLimits, limit_setpoint
+from app.adapters.vehicle.autopilots.limits import SentSetpoint, SetpointLimits, limit_setpoint
 from app.adapters.vehicle.autopilots.px4 import (
     PX4_TELEMETRY_RATES_HZ,
     Px4FixedWingAdapter,
@@ -147,6 +147,46 @@ async def test_px4_with_the_sign_fixed_gets_the_acceleration_unmirrored():
     )
     v, a = (velocity.north_m_s, velocity.east_m_s), (0.0, 1.5)
     assert px4_v1_16_curvature(v, a, fixed=True) == pytest.approx(0.1 / 15.0)
+
+
+async def test_px4_lays_the_line_along_the_wanted_course_not_the_led_command() -> None:
+    """A course command leads the wanted course by rate / k for a first-order course loop;
+    NPFG turns onto the line and feeds the curvature forward itself, so with the feed-forward
+    the line (its point, velocity and yaw) and the acceleration follow the wanted course; a led
+    line would make PX4 turn tighter than the circle. Without the feed-forward (or without a
+    wanted course) the led command is the line."""
+    led = CourseSpeedCommand(0.3, 15.0, course_rate_rad_s=-0.15, path_course_rad=0.45)
+    adapter, offboard, _, _ = px4()
+    await adapter.send(led, 100.0, PX4_STATE)
+    _, position, velocity, acceleration = offboard.calls[0]
+    assert PX4_STATE.local_ned_m is not None
+    north0, east0, _ = PX4_STATE.local_ned_m
+    assert math.atan2(position.east_m - east0, position.north_m - north0) == pytest.approx(0.45)
+    assert math.atan2(velocity.east_m_s, velocity.north_m_s) == pytest.approx(0.45)
+    assert velocity.yaw_deg == pytest.approx(math.degrees(0.45))
+    # the acceleration is normal to the line's velocity
+    dot = acceleration.north_m_s2 * velocity.north_m_s + acceleration.east_m_s2 * velocity.east_m_s
+    assert dot == pytest.approx(0.0, abs=1e-9)
+    plain, offboard, _, _ = px4(curvature_feed_forward=False)
+    await plain.send(led, 100.0, PX4_STATE)
+    _, _, velocity = offboard.calls[0]
+    assert math.atan2(velocity.east_m_s, velocity.north_m_s) == pytest.approx(0.3)
+    adapter, offboard, _, _ = px4()
+    await adapter.send(CourseSpeedCommand(0.3, 15.0, course_rate_rad_s=-0.15), 100.0, PX4_STATE)
+    _, _, velocity, _ = offboard.calls[0]
+    assert math.atan2(velocity.east_m_s, velocity.north_m_s) == pytest.approx(0.3)
+
+
+def test_a_limited_course_change_drops_the_wanted_course_too() -> None:
+    previous = SentSetpoint(0.0, 0.0, 15.0)
+    command = CourseSpeedCommand(1.0, 15.0, path_course_rad=1.1)
+    limited, reasons = limit_setpoint(command, 1.0, previous, LIMITS)
+    assert [r.kind for r in reasons] == ["course_rate"]
+    assert limited.course_rad == pytest.approx(MAX_RATE)
+    assert limited.path_course_rad is None  # the limited course is flown, not the path's
+    small = CourseSpeedCommand(0.5 * MAX_RATE, 15.0, path_course_rad=0.07)
+    kept, _ = limit_setpoint(small, 1.0, previous, LIMITS)
+    assert kept.path_course_rad == 0.07
 
 
 async def test_px4_acceleration_is_held_to_the_envelope():

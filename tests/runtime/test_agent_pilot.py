@@ -153,6 +153,17 @@ async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude(
         assert any(abs(r) > 0.01 for r in rates)
         # counter-clockwise seen from above: the course falls (clockwise positive)
         assert sum(r < 0.0 for r in rates) > 0.8 * len(rates)
+        # the wanted course goes with the led command: behind it by about rate / k in a turn
+        # (the offboard-start command, the vehicle's own course, has none)
+        sent = link.commands[1:]
+        assert all(c.path_course_rad is not None for c in sent)
+        k = plan.agents[i].agent.envelope.course_gain_per_s
+        leads = [
+            math.remainder(c.course_rad - c.path_course_rad, 2.0 * math.pi)
+            for c in sent[-10:]
+            if c.path_course_rad is not None
+        ]
+        assert leads == pytest.approx([c.course_rate_rad_s / k for c in sent[-10:]], abs=0.05)
     base = plan.config.link.altitude_m
     assert altitudes == [base + i * stack_m for i in range(plan.count)]
 

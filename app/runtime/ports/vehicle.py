@@ -70,12 +70,17 @@ class CourseSpeedCommand:
     ``None`` keeps the altitude the vehicle had when offboard started. ``course_rate_rad_s`` is
     the rate at which the wanted ground course turns (rad/s, positive clockwise seen from above),
     for adapters that can feed the path's curvature forward (PX4's offboard acceleration).
+    ``path_course_rad`` is the wanted ground course itself, before the course command's lead
+    for a first-order course loop (``guidance.course.course_command``: rate / k ahead of it);
+    an adapter that hands the path to a path follower feeding its curvature forward flies it
+    instead of ``course_rad`` (None: ``course_rad``).
     """
 
     course_rad: float
     speed_m_s: float
     altitude_m: float | None = None
     course_rate_rad_s: float = 0.0
+    path_course_rad: float | None = None
 
     def __post_init__(self) -> None:
         _require_finite("course_rad", self.course_rad)
@@ -85,6 +90,8 @@ class CourseSpeedCommand:
         if self.altitude_m is not None:
             _require_finite("altitude_m", self.altitude_m)
         _require_finite("course_rate_rad_s", self.course_rate_rad_s)
+        if self.path_course_rad is not None:
+            _require_finite("path_course_rad", self.path_course_rad)
 
 
 @dataclass(frozen=True, slots=True)

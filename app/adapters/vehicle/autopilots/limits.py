@@ -109,6 +109,8 @@ def limit_setpoint(
                 )
             )
             course = wrap_pi(previous.course_rad + math.copysign(allowed, delta))
+            # the path's own course is not flown either: the limited course is
+            command = replace(command, path_course_rad=None)
     max_rate = envelope.max_course_rate_rad_s
     course_rate = command.course_rate_rad_s
     if abs(course_rate) > max_rate + COURSE_TOLERANCE_RAD:

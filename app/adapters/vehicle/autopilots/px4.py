@@ -113,6 +113,13 @@ class Px4FixedWingAdapter(OffboardControl):
     so a vehicle on a turning course is not left to catch the turn by feedback alone;
     ``curvature_feed_forward`` False sends position + velocity only.
 
+    **The line's course.** With the curvature fed forward, the line is laid along the wanted
+    ground course itself (``CourseSpeedCommand.path_course_rad``), not along the course
+    command, which leads it by rate / k for a first-order course loop: NPFG turns onto a line
+    and feeds its curvature forward, so a line led into the turn makes it turn tighter than the
+    circle, and the team settled 2-4 m inside the 90 m circle on real v1.16 SIH (and on the
+    simulator's PX4). Without the feed-forward the led command is the line.
+
     **The sign in v1.16.** That branch computes the curvature's direction as
     ``-v_hat.cross(a_n_hat)``: an acceleration to the right of the velocity (a clockwise turn)
     comes out as a negative radius, which NPFG flies as counter-clockwise (its positive curvature
@@ -261,11 +268,12 @@ class Px4FixedWingAdapter(OffboardControl):
             )
         north0, east0, down0 = state.local_ned_m
         lookahead = max(self.min_lookahead_m, self.lookahead_s * setpoint.speed_m_s)
-        cos_c, sin_c = math.cos(setpoint.course_rad), math.sin(setpoint.course_rad)
+        course = self.line_course(setpoint)
+        cos_c, sin_c = math.cos(course), math.sin(course)
         north = north0 + lookahead * cos_c
         east = east0 + lookahead * sin_c
         down = down0 - (altitude_m - state.relative_altitude_m)
-        yaw = math.degrees(wrap_pi(setpoint.course_rad))
+        yaw = math.degrees(wrap_pi(course))
         v_north, v_east = setpoint.speed_m_s * cos_c, setpoint.speed_m_s * sin_c
         check_finite(
             {"north": north, "east": east, "down": down, "v_north": v_north, "v_east": v_east},
@@ -276,12 +284,19 @@ class Px4FixedWingAdapter(OffboardControl):
             VelocityNedYaw(north_m_s=v_north, east_m_s=v_east, down_m_s=0.0, yaw_deg=yaw),
         )
 
+    def line_course(self, setpoint: CourseSpeedCommand) -> float:
+        """The course the line is laid along: the wanted ground course where the curvature is
+        fed forward and the command carries it, else the (led) course command."""
+        if self.curvature_feed_forward and setpoint.path_course_rad is not None:
+            return setpoint.path_course_rad
+        return setpoint.course_rad
+
     def acceleration(self, setpoint: CourseSpeedCommand) -> AccelerationNed:
         """The acceleration that makes PX4 feed forward the course's rate as the path's
         curvature (mirrored for v1.16's sign, ``mirror_normal_accel``); vertical 0 (PX4's
         fixed-wing controller ignores it)."""
         north, east = normal_acceleration_ned(
-            setpoint.course_rad,
+            self.line_course(setpoint),
             setpoint.speed_m_s,
             setpoint.course_rate_rad_s,
             self.limits.envelope.max_course_rate_rad_s,
