@@ -2,7 +2,7 @@
 50 Hz, side by side in one run (issue #15 item 1).
 
 Run:  .venv/bin/python -m benchmarks.bench_latency [CONFIG] [--latency 0.5] [--rates 5 10 50]
-      [--seeds 6] [--vary-command 4] [--told] [--mavlink [--speedup X]]
+      [--seeds 6] [--vary-command 4] [--told] [--mavlink [--speedup X] [--runs N]]
 
 Flies ``CONFIG`` (default ``hil``) on the mission's fast simulation
 (``app.compose.mission_fastsim``: the agents' and the ground's logic on the eq. (2) plant, the
@@ -29,6 +29,9 @@ every vehicle's link ``--latency / 2`` seconds each way (``[sim] link_delays_s``
 acts ``--latency`` after the frame it was computed from was sampled, and the frames arrive half
 of that old. The agents are not told; what they fly on is what they measure (the links'
 TIMESYNC delay, the course-loop identifier's). ``--speedup`` sets the simulator's speed-up.
+``--runs N`` (1) flies every variant N times, run k with the simulator's seed k and its
+tracking command (k - 1) * ``--vary-command`` s later, the variants of one k one after the
+other (so a load on the machine falls on them alike), and prints the means.
 """
 
 import argparse
@@ -88,10 +91,11 @@ def main() -> None:
     parser.add_argument("--told", action="store_true", help="also a run told the latency")
     parser.add_argument("--mavlink", action="store_true", help="standoff fly over MAVLink")
     parser.add_argument("--speedup", type=float, help="simulator speed-up with --mavlink")
+    parser.add_argument("--runs", type=int, default=1, help="runs per variant with --mavlink")
     args = parser.parse_args()
     config = load_config(args.config, MissionConfig)
     if args.mavlink:
-        _main_mavlink(config, args.rates, args.latency, args.speedup)
+        _main_mavlink(config, args.rates, args.latency, args.speedup, args.runs, args.vary_command)
         return
     told = config.model_copy(
         update={"guidance": config.guidance.model_copy(update={"latency_s": args.latency})}
@@ -145,46 +149,69 @@ def main() -> None:
 
 
 def _main_mavlink(
-    config: MissionConfig, rates: list[float], latency_s: float, speedup: float | None
+    config: MissionConfig,
+    rates: list[float],
+    latency_s: float,
+    speedup: float | None,
+    runs: int = 1,
+    vary_command_s: float = 4.0,
 ) -> None:
     sim = config.sim if speedup is None else config.sim.model_copy(update={"speedup": speedup})
     print(
         f"bench_latency: {config.name}, {config.vehicles} vehicles, MAVLink (built-in "
         f"simulator at {sim.speedup:g}x), rates {', '.join(f'{r:g}' for r in rates)} Hz, "
-        f"latency {latency_s:g} s ({latency_s / 2:g} s each way), one run each"
+        f"latency {latency_s:g} s ({latency_s / 2:g} s each way), {runs} run(s) each"
+        + (f" (tracking command {vary_command_s:g} s later per run)" if runs > 1 else "")
     )
     root = Path(tempfile.mkdtemp(prefix="bench-latency-"))
     Figures = dict[str, float | None]
+    variants = [("no latency", 0.0), (f"{latency_s:g} s untold", latency_s / 2)]
+    flown: dict[tuple[float, str], list[Figures]] = {}
+    said: dict[tuple[float, str], list[float]] = {}
+    for k in range(1, runs + 1):
+        for rate in rates:
+            for name, delay in variants:
+                run_sim = sim.model_copy(
+                    update={
+                        "telemetry_rate_hz": rate,
+                        "link_delays_s": (delay,) * config.vehicles,
+                        "seed": sim.seed + k - 1,
+                    }
+                )
+                command_s = config.tracking_command_s + (k - 1) * vary_command_s
+                variant = config.model_copy(
+                    update={"sim": run_sim, "tracking_command_s": command_s}
+                )
+                start = time.monotonic()
+                out_dir = root / f"{rate:g}hz-{delay:g}-run{k}"
+                summary = asyncio.run(_fly_mavlink(variant, out_dir))
+                flown.setdefault((rate, name), []).append(_figures(summary))
+                links = (summary.get("links") or {}).values()
+                said.setdefault((rate, name), []).extend(
+                    d for c in links if (d := c.get("link_delay_s")) is not None
+                )
+                print(
+                    f"  flown: run {k}, {rate:g} Hz, {name} "
+                    f"({time.monotonic() - start:.0f} s wall, {out_dir})",
+                    flush=True,
+                )
     table: list[tuple[str, Figures, str, Figures]] = []
     for rate in rates:
-        base: Figures | None = None
-        for name, delay in (("no latency", 0.0), (f"{latency_s:g} s untold", latency_s / 2)):
-            run_sim = sim.model_copy(
-                update={"telemetry_rate_hz": rate, "link_delays_s": (delay,) * config.vehicles}
-            )
-            variant = config.model_copy(update={"sim": run_sim})
-            start = time.monotonic()
-            out_dir = root / f"{rate:g}hz-{delay:g}"
-            summary = asyncio.run(_fly_mavlink(variant, out_dir))
-            figures = _figures(summary)
-            base = base or figures
-            links = (summary.get("links") or {}).values()
-            measured = [c.get("link_delay_s") for c in links if c.get("link_delay_s") is not None]
-            said = f"{min(measured):.3f}-{max(measured):.3f} s" if measured else "none"
-            table.append((f"{rate:g} Hz, {name}", figures, said, base))
-            print(
-                f"  flown: {rate:g} Hz, {name} ({time.monotonic() - start:.0f} s wall, {out_dir})",
-                flush=True,
-            )
+        base = _mean(flown[(rate, variants[0][0])])
+        for name, _ in variants:
+            measured = said[(rate, name)]
+            delays = f"{min(measured):.3f}-{max(measured):.3f} s" if measured else "none"
+            table.append((f"{rate:g} Hz, {name}", _mean(flown[(rate, name)]), delays, base))
     keys = list(table[0][1])
     print(f"\n{'run':<24}" + "".join(f"{k:>14}" for k in keys) + "   link delay measured")
-    for name, figures, said, base in table:
+    for name, figures, delays, base in table:
         cells = "".join(f"{_cell(figures.get(k), base.get(k)):>14}" for k in keys)
-        print(f"{name:<24}{cells}   {said}")
+        print(f"{name:<24}{cells}   {delays}")
     print(
         "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
-        " spacing error deg; ratios against the same rate's run without latency; link delay:"
-        " each link's TIMESYNC one-way estimate at the end)"
+        " spacing error deg; means over the runs (never: some run did not form), ratios against"
+        " the same rate's runs without latency; link delay: each link's TIMESYNC one-way"
+        " estimate at the end)"
     )
 
 
