@@ -17,6 +17,10 @@ all on the same seeds:
 - +latency: planned, the agents steering on the state predicted for the middle of each
   command's 0.1 s hold, ``--latency-ticks`` * 0.1 s late (``latency_s``, ``hold_s``);
 - +both: planned with the cap and the latency compensation;
+- +slow: +latency with a long turn flown slow (``GuidanceParams.turn_slow_rad`` from the
+  config, ``[guidance] track_turn_slow_deg``: the ground speed capped on a ramp of the course
+  error down to the minimum), the mission's default track stage; the variants above have it
+  off;
 - with ``--horizon``, also +horizon: +latency with the receding-horizon planner
   (``planner="horizon"``, ``app.core.guidance.horizon``: the team's course rates and speeds
   planned 40 s ahead on the estimate every 2 s), printed with the agents' CPU per run;
@@ -133,14 +137,24 @@ def variants(
     plan: MissionPlan, lag: float, horizon: bool = False, lead_speed_m_s: float | None = None
 ) -> dict[str, MissionPlan]:
     base = plan.agents[0].agent.guidance
-    planned: dict[str, Any] = {"law": "frew", "orbit_plan": "ellipse", "speed_cap": False}
+    track = plan.agents[0].track
+    slow = None if track is None else track.guidance.turn_slow_rad
+    planned: dict[str, Any] = {
+        "law": "frew",
+        "orbit_plan": "ellipse",
+        "speed_cap": False,
+        "turn_slow_rad": None,
+    }
+    off: dict[str, Any] = {"speed_cap": False, "turn_slow_rad": None}
     out = {
-        "paper": variant(plan, law=base.law, orbit_plan="circle", speed_cap=False),
+        "paper": variant(plan, law=base.law, orbit_plan="circle", **off),
         "planned": variant(plan, **planned),
         "+cap": variant(plan, **(planned | {"speed_cap": True})),
         "+latency": variant(plan, lag, HOLD_S, **planned),
         "+both": variant(plan, lag, HOLD_S, **(planned | {"speed_cap": True})),
     }
+    if slow is not None:
+        out["+slow"] = variant(plan, lag, HOLD_S, **(planned | {"turn_slow_rad": slow}))
     if horizon:
         out["+horizon"] = variant(plan, lag, HOLD_S, **(planned | {"planner": "horizon"}))
     if lead_speed_m_s is not None:

@@ -39,6 +39,10 @@ class MissionGuidanceConfig(GuidanceConfig):
     exactly like the approach.
     ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
     moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
+    ``track_turn_slow_deg``: (start, full) course errors, deg: in the track stage, where the
+    field's course is more than ``start`` from the vehicle's the ground speed is capped on a
+    ramp down to the minimum speed at ``full``, so that a long turn is flown on the tightest
+    circle the vehicle has (``GuidanceParams.turn_slow_rad``); None: off.
     ``latency_s``: the time from a telemetry frame until its command starts to act on the
     vehicle; ``hold_s``: how long a command acts (the control period, 0.1 s at 10 Hz telemetry).
     Each agent steers on where its vehicle and the target will be in the middle of the hold
@@ -61,6 +65,10 @@ class MissionGuidanceConfig(GuidanceConfig):
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
+    track_turn_slow_deg: tuple[NonNegative, Annotated[float, Field(gt=0.0, le=180.0)]] | None = (
+        20.0,
+        40.0,
+    )
     latency_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     hold_s: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.1
     course_loop_identification: Literal["fly", "report", "off"] = "fly"
@@ -68,6 +76,13 @@ class MissionGuidanceConfig(GuidanceConfig):
     track_planner: Literal["field", "horizon"] = "field"
     track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=2.0)] = 40.0
     track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 2.0
+
+    @field_validator("track_turn_slow_deg")
+    @classmethod
+    def _turn_slow_order(cls, value: tuple[float, float] | None) -> tuple[float, float] | None:
+        if value is not None and not value[0] < value[1]:
+            raise ValueError(f"track_turn_slow_deg needs start < full, got {list(value)}")
+        return value
 
 
 class MissionPhaseConfig(PhaseConfig):

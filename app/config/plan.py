@@ -80,6 +80,14 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             inverse_field=False,
             orbit_plan=g.track_orbit_plan,
             speed_cap=g.track_speed_cap,
+            turn_slow_rad=(
+                None
+                if g.track_turn_slow_deg is None
+                else (
+                    math.radians(g.track_turn_slow_deg[0]),
+                    math.radians(g.track_turn_slow_deg[1]),
+                )
+            ),
             planner=g.track_planner,
             horizon=HorizonParams(horizon_s=g.track_horizon_s, replan_s=g.track_replan_s),
         )

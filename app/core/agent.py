@@ -70,6 +70,12 @@ class GuidanceParams:
     course-rate limit at the speed the phase law wants (``orbit_plan.orbit_speed_cap``: flying
     against the target's motion, e.g. at most 11.2 m/s on the 90 m circle around a 3 m/s
     target), braking ahead of such a place at ``speed_cap_brake`` of the envelope's acceleration.
+    ``turn_slow_rad`` (improvement): a (start, full) pair of course errors: where the field's
+    ground course is more than ``start`` from the vehicle's, the ground speed is capped on a
+    ramp down to the envelope's minimum at ``full`` and beyond, so that a turn the course-rate
+    limit stretches out (a target that turned or stopped under a vehicle on its far side) is
+    flown on the tightest circle the vehicle has (v / rate) and not at the phase law's speed;
+    None: off.
     ``planner`` (improvement, issue #15 item 4): ``field`` flies the field as above;
     ``horizon`` plans the ground course rate and speed over the next ``horizon.horizon_s`` on
     the target estimate and the team's seats (``guidance.horizon``), every
@@ -94,6 +100,7 @@ class GuidanceParams:
     speed_cap: bool = False
     speed_cap_margin: float = 0.95
     speed_cap_brake: float = 0.7
+    turn_slow_rad: tuple[float, float] | None = None
     planner: Planner = "field"
     horizon: hz.HorizonParams = field(default_factory=hz.HorizonParams)
     #: +1 counter-clockwise, -1 clockwise (derived from ``orbit``)
@@ -140,6 +147,15 @@ class GuidanceParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 < value <= 1.0):
                 raise ValueError(f"GuidanceParams.{name} must be in (0, 1], got {value!r}")
+        if self.turn_slow_rad is not None:
+            start, full = self.turn_slow_rad
+            if not (
+                math.isfinite(start) and math.isfinite(full) and 0.0 <= start < full <= math.pi
+            ):
+                raise ValueError(
+                    "GuidanceParams.turn_slow_rad must be (start, full) with"
+                    f" 0 <= start < full <= pi, got {self.turn_slow_rad!r}"
+                )
         uses_inverse = self.law == "proposed" if self.inverse_field is None else self.inverse_field
         object.__setattr__(self, "orbit_sign", 1 if self.orbit == "ccw" else -1)
         object.__setattr__(self, "uses_inverse_field", uses_inverse)
@@ -718,6 +734,8 @@ def agent_step(
         and (tgt.a_north_m_s2 == 0.0)
     ):
         ground_course, ground_rate = rel_course, rel_rate
+        if g.turn_slow_rad is not None and not by_radius:
+            speed_cmd = min(speed_cmd, _turn_slow_cap(own.course_rad, ground_course, g, env))
     else:
         max_speed = env.max_speed_m_s
         if by_radius:
@@ -731,6 +749,13 @@ def agent_step(
         ground_course, ground_rate, speed_cmd = _ground_course(
             rel_course, rel_rate, tgt, speed_cmd, env, relative_speed, max_speed
         )
+        if g.turn_slow_rad is not None and not by_radius:
+            cap = _turn_slow_cap(own.course_rad, ground_course, g, env)
+            if cap < speed_cmd:
+                # the same field direction flown at the capped ground speed (eq. 15 again)
+                ground_course, ground_rate, speed_cmd = _ground_course(
+                    rel_course, rel_rate, tgt, cap, env, False, cap
+                )
 
     cmd_course = course_command(own.course_rad, ground_course, ground_rate, params.course_loop)
     command = Command(
@@ -1030,6 +1055,17 @@ def _ground_course(
     rate = (gy * ax - gx * ay) / g2
     # (clamped again only against rounding: the velocity was already scaled it in)
     return course, rate, min(max(math.sqrt(g2), env.min_speed_m_s), max_speed_m_s)
+
+
+def _turn_slow_cap(
+    course_rad: float, wanted_rad: float, g: GuidanceParams, env: VehicleEnvelope
+) -> float:
+    """The ground-speed cap of ``GuidanceParams.turn_slow_rad`` for a course error."""
+    assert g.turn_slow_rad is not None
+    start, full = g.turn_slow_rad
+    error = abs(wrap_pi(wanted_rad - course_rad))
+    share = min(max((error - start) / (full - start), 0.0), 1.0)
+    return env.max_speed_m_s - share * (env.max_speed_m_s - env.min_speed_m_s)
 
 
 def orbit_axes(speed_m_s: float, params: AgentParams, rd: float) -> tuple[float, float]:

@@ -194,6 +194,20 @@ def test_the_receding_horizon_planner_is_a_track_stage_setting():
             validate_config(raw, MissionConfig, source="m.toml")
 
 
+def test_the_slow_turn_is_a_track_stage_setting_in_degrees() -> None:
+    raw = {**BASE, "guidance": {**BASE["guidance"], "track_turn_slow_deg": [20.0, 40.0]}}
+    config = validate_config(raw, MissionConfig, source="m.toml")
+    for agent in build_plan(config).agents:
+        assert agent.track is not None
+        start, full = agent.track.guidance.turn_slow_rad or (0.0, 0.0)
+        assert (start, full) == pytest.approx((math.radians(20.0), math.radians(40.0)))
+        assert agent.agent.guidance.turn_slow_rad is None
+    for value in ([40.0, 20.0], [20.0, 200.0], [-5.0, 20.0], [20.0]):
+        raw = {**BASE, "guidance": {**BASE["guidance"], "track_turn_slow_deg": value}}
+        with pytest.raises(ConfigError, match=r"guidance\.track_turn_slow_deg"):
+            validate_config(raw, MissionConfig, source="m.toml")
+
+
 def test_the_gather_lead_speed_reaches_gather_and_adjust_only_and_stays_in_the_envelope() -> None:
     for agent in build_plan(load_config("hil", MissionConfig)).agents:
         assert agent.agent.phase.lead_speed_m_s is None  # off by default

@@ -210,3 +210,77 @@ def test_speed_cap_parameters_are_checked() -> None:
         GuidanceParams(radius_m=90.0, speed_cap_margin=0.0)
     with pytest.raises(ValueError, match="speed_cap_brake"):
         GuidanceParams(radius_m=90.0, speed_cap_brake=math.inf)
+
+
+# --- turn_slow_rad: a long turn flown slow -------------------------------------------------------
+
+
+def _turning(course_deg: float, target: TargetInfo) -> AgentInputs:
+    # 40 m outside the circle on its north side, the teammate a quarter turn ahead of its seat
+    # (the phase law wants the top speed)
+    return AgentInputs(
+        t_s=0.0,
+        own=OwnTelemetry(0.0, 130.0, math.radians(course_deg), 17.0),
+        target=target,
+        team_positions=((0.0, 130.0), (90.0, 0.0)),
+    )
+
+
+@pytest.mark.parametrize("target", [TargetInfo(0.0, 0.0), TargetInfo(0.0, 0.0, 3.0, 0.0)])
+def test_turn_slow_caps_the_speed_on_a_ramp_of_the_course_error(target: TargetInfo) -> None:
+    track = GuidanceParams(radius_m=90.0, law="frew", inverse_field=False)
+    slow = replace(track, turn_slow_rad=(math.radians(20.0), math.radians(40.0)))
+    phase = PhaseParams("paper", 0.5)
+    free_params, slow_params = AgentParams(0, ENV, track, phase), AgentParams(0, ENV, slow, phase)
+    _, aligned, _ = agent_step(AgentState(), _turning(0.0, target), free_params)
+    wanted = math.degrees(aligned.field_course_rad)
+    assert aligned.speed_m_s > 15.0  # the law's speed, well above the minimum
+    for error_deg, most in ((5.0, None), (30.0, 14.0 + 1e-6), (60.0, 10.0 + 1e-9)):
+        inputs = _turning(wanted - error_deg, target)
+        _, free, _ = agent_step(AgentState(), inputs, free_params)
+        _, held, _ = agent_step(AgentState(), inputs, slow_params)
+        assert math.isfinite(held.speed_m_s)
+        assert math.isfinite(held.course_rad)
+        assert ENV.min_speed_m_s <= held.speed_m_s <= ENV.max_speed_m_s
+        if most is None:
+            assert held == free  # below the ramp's start nothing changes
+        else:
+            assert held.speed_m_s <= most < free.speed_m_s
+
+
+def test_turn_slow_parameters_are_checked() -> None:
+    for bad in ((0.5, 0.5), (-0.1, 0.5), (0.2, 4.0), (0.1, math.nan)):
+        with pytest.raises(ValueError, match="turn_slow_rad"):
+            GuidanceParams(radius_m=90.0, turn_slow_rad=bad)
+
+
+@pytest.mark.slow
+def test_a_long_turn_flown_slow_keeps_the_team_closer_after_the_target_turns() -> None:
+    """The ardupilot-sitl mission's B corner (a 7 m/s target stopping north and going east at
+    3 m/s) flings the vehicle on the team's far side outward; flown at the phase law's speed
+    its turn back at the rate limit is a circle of v / rate. The default track stage caps the
+    speed in such a turn (``[guidance] track_turn_slow_deg``); without it the team flies B-C
+    clearly worse (fast simulation, the mission file's own timing)."""
+    plan = build_plan(load_config("ardupilot-sitl", MissionConfig))
+    track = plan.agents[0].track
+    assert track is not None
+    assert track.guidance.turn_slow_rad is not None  # on by default
+    off = replace(
+        plan,
+        agents=tuple(
+            replace(
+                a, track=replace(a.track, guidance=replace(a.track.guidance, turn_slow_rad=None))
+            )
+            for a in plan.agents
+            if a.track is not None
+        ),
+    )
+    figures = {}
+    for name, p in (("slow", plan), ("off", off)):
+        result = run_mission_sim(MissionSimSetup(p, seed=1, latency_ticks=1))
+        assert np.isfinite(result.commands).all()
+        figures[name] = track_figures(result, p.target.labels)["B-C"]
+    slow, free = figures["slow"], figures["off"]
+    assert slow["dist_rms_m"] < 0.85 * free["dist_rms_m"]
+    assert slow["dist_max_m"] < free["dist_max_m"] - 5.0
+    assert slow["spacing_rms_deg"] < 1.1 * free["spacing_rms_deg"]
