@@ -40,45 +40,14 @@ import re
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
-from app.compose.mission import Mission
 from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
-from sitl.ports import find_free_udp_base_port
+from benchmarks.mavlink_runs import Figures, cell, figures_of, fly_mavlink, mean
 
 _DELAY = re.compile(r"delay = ([0-9.]+) s")
-
-
-def _figures(summary: dict[str, Any]) -> dict[str, float | None]:
-    out: dict[str, float | None] = {
-        "formation_s": (summary.get("convergence") or {}).get("time_to_formation_s")
-    }
-    for key, part in (summary.get("parts") or {}).items():
-        if not key.startswith("track:") or key == "track:wait":
-            continue
-        label = key.removeprefix("track:")
-        out[f"{label} dist"] = part["team"]["distance_error_m"]["rms"]
-        out[f"{label} spacing"] = part["team"]["spacing_error_deg"]["rms"]
-    return out
-
-
-def _mean(runs: list[dict[str, float | None]]) -> dict[str, float | None]:
-    out: dict[str, float | None] = {}
-    for key in runs[0]:
-        values = [v for r in runs if (v := r.get(key)) is not None]
-        out[key] = sum(values) / len(values) if len(values) == len(runs) else None
-    return out
-
-
-def _cell(value: float | None, base: float | None) -> str:
-    if value is None:
-        return "   never     "
-    if base is None or not base > 0.0:
-        return f"{value:7.1f}      "
-    return f"{value:7.1f} {value / base:4.2f}x"
 
 
 def main() -> None:
@@ -108,7 +77,6 @@ def main() -> None:
         f"{args.seeds} seeds each (tracking command {args.vary_command:g} s later per seed), "
         f"rates {', '.join(f'{r:g}' for r in args.rates)} Hz"
     )
-    Figures = dict[str, float | None]
     table: list[tuple[str, Figures, str, Figures]] = []  # name, figures, delays, baseline
     for rate in args.rates:
         base: Figures | None = None
@@ -123,13 +91,13 @@ def main() -> None:
                     plan, seed=seed, control_period_s=1.0 / rate, latency_s=latency
                 )
                 result = run_mission_sim(setup)
-                runs.append(_figures(result.summary))
+                runs.append(figures_of(result.summary))
                 last: dict[str, float] = {}  # each vehicle's newest identified delay
                 for _, kind, detail in result.events:
                     if kind == "course_loop_identified" and (m := _DELAY.search(detail)):
                         last[detail.split(":", 1)[0]] = float(m.group(1))
                 delays.extend(last.values())
-            figures = _mean(runs)
+            figures = mean(runs)
             base = base or figures
             identified = f"{min(delays):.2f}-{max(delays):.2f} s" if delays else "none"
             table.append((f"{rate:g} Hz, {name}", figures, identified, base))
@@ -139,7 +107,7 @@ def main() -> None:
     keys = list(table[0][1])
     print(f"\n{'run':<24}" + "".join(f"{k:>14}" for k in keys) + "   delays identified")
     for name, figures, identified, base in table:
-        cells = "".join(f"{_cell(figures.get(k), base.get(k)):>14}" for k in keys)
+        cells = "".join(f"{cell(figures.get(k), base.get(k)):>14}" for k in keys)
         print(f"{name:<24}{cells}   {identified}")
     print(
         "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
@@ -164,7 +132,6 @@ def _main_mavlink(
         + (f" (tracking command {vary_command_s:g} s later per run)" if runs > 1 else "")
     )
     root = Path(tempfile.mkdtemp(prefix="bench-latency-"))
-    Figures = dict[str, float | None]
     variants = [("no latency", 0.0), (f"{latency_s:g} s untold", latency_s / 2)]
     flown: dict[tuple[float, str], list[Figures]] = {}
     said: dict[tuple[float, str], list[float]] = {}
@@ -184,8 +151,8 @@ def _main_mavlink(
                 )
                 start = time.monotonic()
                 out_dir = root / f"{rate:g}hz-{delay:g}-run{k}"
-                summary = asyncio.run(_fly_mavlink(variant, out_dir))
-                flown.setdefault((rate, name), []).append(_figures(summary))
+                summary = asyncio.run(fly_mavlink(variant, out_dir))
+                flown.setdefault((rate, name), []).append(figures_of(summary))
                 links = (summary.get("links") or {}).values()
                 said.setdefault((rate, name), []).extend(
                     d for c in links if (d := c.get("link_delay_s")) is not None
@@ -197,15 +164,15 @@ def _main_mavlink(
                 )
     table: list[tuple[str, Figures, str, Figures]] = []
     for rate in rates:
-        base = _mean(flown[(rate, variants[0][0])])
+        base = mean(flown[(rate, variants[0][0])])
         for name, _ in variants:
             measured = said[(rate, name)]
             delays = f"{min(measured):.3f}-{max(measured):.3f} s" if measured else "none"
-            table.append((f"{rate:g} Hz, {name}", _mean(flown[(rate, name)]), delays, base))
+            table.append((f"{rate:g} Hz, {name}", mean(flown[(rate, name)]), delays, base))
     keys = list(table[0][1])
     print(f"\n{'run':<24}" + "".join(f"{k:>14}" for k in keys) + "   link delay measured")
     for name, figures, delays, base in table:
-        cells = "".join(f"{_cell(figures.get(k), base.get(k)):>14}" for k in keys)
+        cells = "".join(f"{cell(figures.get(k), base.get(k)):>14}" for k in keys)
         print(f"{name:<24}{cells}   {delays}")
     print(
         "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
@@ -213,14 +180,6 @@ def _main_mavlink(
         " the same rate's runs without latency; link delay: each link's TIMESYNC one-way"
         " estimate at the end)"
     )
-
-
-async def _fly_mavlink(config: MissionConfig, out_dir: Path) -> dict[str, Any]:
-    plan = build_plan(config)
-    port = find_free_udp_base_port(plan.count)
-    async with asyncio.timeout(20 * 60):
-        result = await Mission(plan, out_dir, base_port=port).run()
-    return result.summary
 
 
 if __name__ == "__main__":
