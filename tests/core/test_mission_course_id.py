@@ -165,8 +165,9 @@ def test_course_id_change_is_validated() -> None:
 def test_the_hil_mission_on_a_weak_autopilot_flies_the_circle_once_identified() -> None:
     """The whole mission logic (``compose.mission_fastsim``: cameras, fusion, stages, three
     agents) on vehicles that turn at k = 0.55 /s while the plan assumes 1 /s. Flying the assumed
-    k the team orbits far outside the circle and never leaves gather; with identification every
-    agent learns k in the first seconds and the team forms and tracks."""
+    k the team orbits far outside the circle and never arrives (it goes from gather to track
+    only once the target has left); with identification every agent learns k in the first
+    seconds and the team arrives, forms and tracks."""
     from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim
     from app.config import load_config
     from app.config.mission import MissionConfig
@@ -193,7 +194,7 @@ def test_the_hil_mission_on_a_weak_autopilot_flies_the_circle_once_identified() 
     assert learned_off == []
     assert len(learned_on) == 3
     assert all("flown with k = 0.55" in d for d in learned_on)
-    assert "track" not in stages_off
-    assert "track" in stages_on
+    assert "adjust" not in stages_off
+    assert {"adjust", "track"} <= stages_on
     assert rms_off > 30.0
     assert rms_on < 0.25 * rms_off

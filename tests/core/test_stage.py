@@ -77,6 +77,20 @@ def test_a_moving_target_ends_the_adjust_stage():
     assert s.stage is Stage.TRACK
 
 
+def test_a_target_moving_for_the_dwell_ends_the_gather_stage() -> None:
+    s = StageState(Stage.GATHER, 0.0)
+    far = [400.0, 20.0, 5.0]  # one vehicle still far out: not arrived
+    s = next_stage(s, 100.0, True, team(far, speed=3.0), PARAMS)
+    assert (s.stage, s.moving_since_t_s) == (Stage.GATHER, 100.0)
+    s = next_stage(s, 102.0, True, team(far, speed=0.5), PARAMS)  # one slow estimate
+    assert (s.stage, s.moving_since_t_s) == (Stage.GATHER, None)
+    for t in (103.0, 105.0, 107.9):
+        s = next_stage(s, t, True, team(far, speed=3.0), PARAMS)
+        assert s.stage is Stage.GATHER
+    s = next_stage(s, 108.0, True, team(far, speed=3.0), PARAMS)
+    assert (s.stage, s.since_t_s) == (Stage.TRACK, 108.0)
+
+
 def test_an_empty_team_never_counts_as_formed_or_arrived():
     s = next_stage(StageState(Stage.GATHER, 0.0), 1.0, True, TeamView((), (), 0.0), PARAMS)
     assert s.stage is Stage.GATHER

@@ -70,10 +70,15 @@ def adjacent_phase_differences(phases_rad: NDArray[np.float64]) -> NDArray[np.fl
 class StageParams:
     """When to move on.
 
-    gather -> adjust once every active vehicle is within ``arrive_tolerance_m`` of the circle.
-    adjust -> track once every vehicle is within ``radius_tolerance_m`` and every adjacent gap
-    within ``spacing_tolerance_rad`` of 2 pi / n for ``dwell_s``, or as soon as the target is
-    seen moving faster than ``moving_speed_m_s`` (tracking a moving target cannot wait).
+    gather -> adjust once every active vehicle is within ``arrive_tolerance_m`` of the circle,
+    or gather -> track once the target has been seen moving faster than ``moving_speed_m_s``
+    for ``dwell_s`` (a team still gathering when the target leaves, e.g. a large one still
+    climbing to its altitude stack, flies the track stage's guidance for a moving target
+    rather than the stationary-target approach; the dwell keeps one noisy estimate early in
+    gather from starting it). adjust -> track once every vehicle is within
+    ``radius_tolerance_m`` and every adjacent gap within ``spacing_tolerance_rad`` of 2 pi / n
+    for ``dwell_s``, or as soon as the target is seen moving faster than ``moving_speed_m_s``
+    (tracking a moving target cannot wait).
     """
 
     arrive_tolerance_m: float = 15.0
@@ -98,11 +103,13 @@ class StageParams:
 
 @dataclass(frozen=True, slots=True)
 class StageState:
-    """The current stage, when it began, and since when the team has been in formation."""
+    """The current stage, when it began, since when the team has been in formation, and since
+    when the target has been seen moving (None: not now)."""
 
     stage: Stage = Stage.STANDBY
     since_t_s: float = 0.0
     formed_since_t_s: float | None = None
+    moving_since_t_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,19 +144,25 @@ def next_stage(
             return StageState(Stage.GATHER, t_s)
         return state
     formed = team.in_formation(params)
-    formed_since = (
-        (state.formed_since_t_s if state.formed_since_t_s is not None else t_s) if formed else None
-    )
-    state = replace(state, formed_since_t_s=formed_since)
+    formed_since = _since(state.formed_since_t_s, t_s) if formed else None
+    moving = team.target_speed_m_s > params.moving_speed_m_s
+    moving_since = _since(state.moving_since_t_s, t_s) if moving else None
+    state = replace(state, formed_since_t_s=formed_since, moving_since_t_s=moving_since)
     if state.stage is Stage.GATHER:
         arrived = bool(team.distance_errors_m) and all(
             abs(e) <= params.arrive_tolerance_m for e in team.distance_errors_m
         )
         if arrived:
-            return StageState(Stage.ADJUST, t_s, formed_since)
+            return StageState(Stage.ADJUST, t_s, formed_since, moving_since)
+        if moving_since is not None and t_s - moving_since >= params.dwell_s:
+            return StageState(Stage.TRACK, t_s, formed_since, moving_since)
         return state
     if state.stage is Stage.ADJUST:
         dwelt = formed_since is not None and t_s - formed_since >= params.dwell_s
-        if dwelt or team.target_speed_m_s > params.moving_speed_m_s:
-            return StageState(Stage.TRACK, t_s, formed_since)
+        if dwelt or moving:
+            return StageState(Stage.TRACK, t_s, formed_since, moving_since)
     return state
+
+
+def _since(since_t_s: float | None, t_s: float) -> float:
+    return since_t_s if since_t_s is not None else t_s
