@@ -28,27 +28,18 @@ import time
 from pathlib import Path
 from typing import Any
 
-from app.compose.mission import Mission
 from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.config.simulator import WindModel
-from sitl.ports import find_free_udp_base_port
+from benchmarks.mavlink_runs import cell, figures_of, fly_mavlink
 
 
 def _variant(config: MissionConfig, wind: WindModel, mode: str) -> MissionConfig:
     sim = config.sim.model_copy(update={"wind": wind})
     guidance = config.guidance.model_copy(update={"wind": mode})
     return config.model_copy(update={"sim": sim, "guidance": guidance})
-
-
-async def _fly(config: MissionConfig, out_dir: Path) -> dict[str, Any]:
-    plan = build_plan(config)
-    port = find_free_udp_base_port(plan.count)
-    async with asyncio.timeout(15 * 60):
-        result = await Mission(plan, out_dir, base_port=port).run()
-    return result.summary
 
 
 def _fly_fast(config: MissionConfig, seeds: int) -> list[dict[str, Any]]:
@@ -67,28 +58,6 @@ def _mean(figures: list[dict[str, float | None]]) -> tuple[dict[str, float | Non
         out[key] = sum(values) / len(values) if values else None
     formed = sum(1 for f in figures if f["formation_s"] is not None)
     return out, formed
-
-
-def _figures(summary: dict[str, Any]) -> dict[str, float | None]:
-    out: dict[str, float | None] = {
-        "formation_s": (summary.get("convergence") or {}).get("time_to_formation_s")
-    }
-    for key, part in (summary.get("parts") or {}).items():
-        if not key.startswith("track:") or key == "track:wait":
-            continue
-        team = part["team"]
-        label = key.removeprefix("track:")
-        out[f"{label} dist"] = team["distance_error_m"]["rms"]
-        out[f"{label} spacing"] = team["spacing_error_deg"]["rms"]
-    return out
-
-
-def _cell(value: float | None, base: float | None) -> str:
-    if value is None:
-        return "   never     "
-    if base is None or not base > 0.0:
-        return f"{value:7.1f}      "
-    return f"{value:7.1f} {value / base:4.2f}x"
 
 
 def main() -> None:
@@ -134,17 +103,17 @@ def main() -> None:
         start = time.monotonic()
         if args.fast:
             figures, formed_count[name] = _mean(
-                [_figures(s) for s in _fly_fast(variant, args.seeds)]
+                [figures_of(s) for s in _fly_fast(variant, args.seeds)]
             )
         else:
-            figures = _figures(asyncio.run(_fly(variant, root / f"run-{i}")))
+            figures = figures_of(asyncio.run(fly_mavlink(variant, root / f"run-{i}")))
         table.append((name, figures))
         print(f"  flown: {name} ({time.monotonic() - start:.0f} s wall)", flush=True)
     keys = list(table[0][1])
     base = table[0][1]
     print(f"\n{'run':<30}" + "".join(f"{k:>14}" for k in keys))
     for name, figures in table:
-        print(f"{name:<30}" + "".join(f"{_cell(figures.get(k), base.get(k)):>14}" for k in keys))
+        print(f"{name:<30}" + "".join(f"{cell(figures.get(k), base.get(k)):>14}" for k in keys))
     print(
         "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
         " spacing error deg; ratios against still air)"
