@@ -90,7 +90,8 @@ class MissionPhaseConfig(PhaseConfig):
     gain in the track stage (None: the same). ``gather_lead_speed_m_s``: in gather and adjust
     the vehicle furthest behind its seat flies this speed and the others slower by the law, so
     that the team closes its gaps at this speed rather than about cruise (None: about cruise,
-    the paper's law); within the envelope's speed range."""
+    the paper's law); within the envelope's speed range. An agent flies it only where the
+    circle can be flown all round at it in the wind it knows (docs/guidance.md "Lead speed")."""
 
     track_gain_per_s: NonNegative | None = None
     gather_lead_speed_m_s: Positive | None = None

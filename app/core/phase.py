@@ -109,6 +109,22 @@ def phase_speed(
     return min(max(v, min_speed_m_s), max_speed_m_s)
 
 
+def circle_ground_speed_in_wind(wind_m_s: float, radius_m: float, max_rate_rad_s: float) -> float:
+    """The fastest constant ground speed g at which a circle of ``radius_m`` can be flown all
+    the way round in a steady wind of ``wind_m_s`` with the heading rate at most
+    ``max_rate_rad_s``: the circle needs a heading rate g^2 / (r a) where the airspeed a is
+    least, downwind (a = g - w), so g^2 - W r g + W r w <= 0, g <= (W r + sqrt((W r)^2 -
+    4 W r w)) / 2 (W r in still air). 0 when no constant ground speed flies it (w > W r / 4)."""
+    values = (wind_m_s, radius_m, max_rate_rad_s)
+    if not (math.isfinite(sum(values)) and wind_m_s >= 0.0 and radius_m > 0.0):
+        raise ValueError(f"circle_ground_speed_in_wind needs finite w >= 0, r > 0: {values!r}")
+    wr = max_rate_rad_s * radius_m
+    disc = wr * wr - 4.0 * wr * wind_m_s
+    if wr <= 0.0 or disc < 0.0:
+        return 0.0
+    return 0.5 * (wr + math.sqrt(disc))
+
+
 # --------------------------------------------------------------------------------------------
 # predicted phase on arrival (improvement over the paper)
 

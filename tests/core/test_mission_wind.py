@@ -2,12 +2,14 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core.agent import AgentEvent, Command, OwnTelemetry
+from app.core.estimation.messages import GlobalEstimate
 from app.core.guidance.wind import airspeed_for
 from app.core.mission import agent as logic
 
@@ -123,3 +125,50 @@ def test_the_autopilots_own_wind_is_flown_from_the_first_frame():
     commands, events = _fly(_params("estimate"), seconds=40.0, reported=(math.nan, 1.0))
     assert all(c.airspeed_m_s is None for c in commands[:100])
     assert "fitted to ground velocity and airspeed" in events[0].detail
+
+
+def _team_speeds(lead, reported):
+    """One control tick of a three-vehicle team in adjust on the default mission's circle about
+    a target at the origin, nearly spaced (each within 0.2 rad of its seat), each autopilot
+    reporting the wind ``reported``: the ground speeds commanded."""
+    config = load_config("hil", MissionConfig)
+    config = config.model_copy(
+        update={"phase": config.phase.model_copy(update={"gather_lead_speed_m_s": lead})}
+    )
+    plist = build_plan(config).agents
+    angles = (0.0, 1.9, 4.0)  # counter-clockwise from east
+    positions = [(90.0 * math.cos(a), 90.0 * math.sin(a), -a) for a in angles]
+    estimate = GlobalEstimate(0.0, np.zeros(6), np.eye(6), (("0", 1.0),))
+    speeds = []
+    for i, p in enumerate(plist):
+        state = logic.hear_mission(
+            logic.initial_agent_state(p), "adjust", tuple(p.vehicle for p in plist)
+        )
+        state = logic.hear_fused(state, estimate, p)
+        for j, (e, n, course) in enumerate(positions):
+            fix = logic.TeammateFix(0.0, e, n, course, 14.0)
+            state = logic.hear_teammate(state, plist[j].vehicle, fix)
+        e, n, course = positions[i]
+        own = OwnTelemetry(e, n, course, 14.0, 14.0, reported)
+        _, command, _ = logic.control(state, 0.0, own, p)
+        speeds.append(command.speed_m_s)
+    return speeds
+
+
+def test_a_lead_speed_is_flown_only_where_the_circle_can_be_flown_at_it_in_the_wind():
+    """In gather and adjust the vehicle furthest behind its seat flies the lead speed, but only
+    where the circle can be flown all round at that ground speed in the wind the agent knows
+    (18 m/s on 90 m at 0.2 rad/s in still air); in 3 m/s it is not, and the paper's law about
+    cruise is flown, as with no lead."""
+    paper = _team_speeds(None, (0.0, 0.0))
+    assert max(paper) < 16.0  # about cruise (14 m/s)
+    still = _team_speeds(18.0, (0.0, 0.0))
+    assert max(still) == pytest.approx(18.0)  # the vehicle furthest behind leads at 18 m/s
+    assert min(still) > 14.0  # and the others slower by the law
+    # the same gaps: the speeds differ by the same amounts
+    assert np.subtract(still, max(still)) == pytest.approx(np.subtract(paper, max(paper)))
+    windy = _team_speeds(18.0, WIND)  # 3.6 m/s
+    assert windy == pytest.approx(_team_speeds(None, WIND))
+    # a lead the wind allows stays: 15 m/s is flyable in 1.5 m/s (up to 16.3 m/s)
+    assert max(_team_speeds(15.0, (1.5, 0.0))) == pytest.approx(15.0)
+    assert max(_team_speeds(17.0, (1.5, 0.0))) < 16.0

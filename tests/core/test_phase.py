@@ -121,3 +121,24 @@ def test_arrival_phase_lead_matches_flying_the_field():
     assert phase.arrival_phase_lead(r0, rd, c) == pytest.approx(lead, abs=2e-3)
     assert phase.arrival_phase_lead(rd, rd, c) == 0.0
     assert phase.arrival_phase_lead(600.0, rd, c) < 0.0
+
+
+def test_the_circle_ground_speed_in_wind_is_where_the_downwind_turn_reaches_the_limit():
+    circle_ground_speed_in_wind = phase.circle_ground_speed_in_wind
+    assert circle_ground_speed_in_wind(0.0, 90.0, 0.2) == pytest.approx(18.0)  # W r
+    for w in (0.5, 1.5, 3.0, 4.4):
+        g = circle_ground_speed_in_wind(w, 90.0, 0.2)
+        # downwind the airspeed is g - w, and the heading rate g^2 / (r a) is at the limit
+        assert g**2 / (90.0 * (g - w)) == pytest.approx(0.2)
+        # a little slower is flyable all round (the rate is largest downwind)
+        h = g - 0.1
+        airspeeds = (
+            math.sqrt(h * h + w * w - 2.0 * h * w * math.cos(math.radians(a))) for a in range(181)
+        )
+        assert max(h * h / (90.0 * a) for a in airspeeds) < 0.2
+    assert circle_ground_speed_in_wind(3.0, 90.0, 0.2) == pytest.approx(14.2, abs=0.05)
+    assert circle_ground_speed_in_wind(4.6, 90.0, 0.2) == 0.0  # beyond W r / 4: none
+    with pytest.raises(ValueError):
+        circle_ground_speed_in_wind(math.nan, 90.0, 0.2)
+    with pytest.raises(ValueError):
+        circle_ground_speed_in_wind(-1.0, 90.0, 0.2)
