@@ -210,7 +210,10 @@ def test_the_slow_turn_is_a_track_stage_setting_in_degrees() -> None:
 
 def test_the_gather_lead_speed_reaches_gather_and_adjust_only_and_stays_in_the_envelope() -> None:
     for agent in build_plan(load_config("hil", MissionConfig)).agents:
-        assert agent.agent.phase.lead_speed_m_s is None  # off by default
+        assert agent.agent.phase.lead_speed_m_s == 18.0  # the default mission's file
+    unset = {k: v for k, v in BASE["phase"].items() if k != "gather_lead_speed_m_s"}
+    for agent in build_plan(validate_config({**BASE, "phase": unset}, MissionConfig)).agents:
+        assert agent.agent.phase.lead_speed_m_s is None  # off where the file does not set it
     raw = {**BASE, "phase": {**BASE["phase"], "gather_lead_speed_m_s": 17.0}}
     for agent in build_plan(validate_config(raw, MissionConfig, source="m.toml")).agents:
         assert agent.agent.phase.lead_speed_m_s == 17.0
