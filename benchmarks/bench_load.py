@@ -5,7 +5,7 @@ three's, the CPU per vehicle growing no faster than linearly; the agents' CPU pe
 real time printed, at most 2 % of a core).
 
 Run:  .venv/bin/python -m benchmarks.bench_load [CONFIG] [--busy 0 2] [--teams N ...]
-      [--runs 1] [--speedup X] [--vary-command 4]
+      [--runs 1] [--speedup X] [--vary-command 4] [--delay S]
 
 Flies ``CONFIG`` (default ``hil``) with ``standoff fly``'s own machinery (the built-in
 simulator in its own process, MAVSDK over UDP, the in-process bus) once per variant and run:
@@ -20,6 +20,13 @@ vehicle at 1x real time (the agents' own, the whole process, and with the simula
 mavsdk_server processes), the share of telemetry frames the agents steered past because a
 tick was still running (``frames_skipped``), the longest a steered frame waited, and the load
 average at the end.
+
+``--delay S`` moves the tracking command and the target's departure (a ``waypoints`` target's
+``wait_s``) S s later, so that the team climbs to its altitude stack in standby before it
+gathers. A team launched together climbs from one height: at 35 m a level
+(``[link] altitude_stack_m``) and about 5 m/s of climb, the top of a 20-vehicle stack is reached
+about 150 s into the mission, after the default mission's target has left (130 s). With the
+delay the team sizes are compared on the mission they fly once up rather than on the climb.
 """
 
 import argparse
@@ -79,18 +86,36 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=1, help="runs per variant (1)")
     parser.add_argument("--speedup", type=float, help="simulator speed-up (the config's)")
     parser.add_argument("--vary-command", type=float, default=4.0, help="s per run (4)")
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=0.0,
+        help="s later the tracking command and the target's departure (0)",
+    )
     args = parser.parse_args()
     config = load_config(args.config, MissionConfig)
     teams = args.teams or [config.vehicles]
-    if min(args.busy) < 0 or min(teams) < 1 or args.runs < 1:
-        parser.error("--busy takes counts from 0, --teams and --runs from 1")
+    if min(args.busy) < 0 or min(teams) < 1 or args.runs < 1 or args.delay < 0:
+        parser.error("--busy takes counts from 0, --teams and --runs from 1, --delay from 0")
+    if args.delay:
+        if not hasattr(config.target, "wait_s"):
+            parser.error("--delay needs a waypoints target (its wait_s)")
+        config = config.model_copy(
+            update={
+                "tracking_command_s": config.tracking_command_s + args.delay,
+                "target": config.target.model_copy(
+                    update={"wait_s": config.target.wait_s + args.delay}
+                ),
+            }
+        )
     sim = config.sim
     if args.speedup is not None:
         sim = sim.model_copy(update={"speedup": args.speedup})
     print(
         f"bench_load: {config.name}, standoff fly on the built-in simulator at {sim.speedup:g}x,"
         f" teams of {', '.join(map(str, teams))}, beside {', '.join(map(str, args.busy))} busy"
-        f" processes, {args.runs} run(s) each, on {os.cpu_count()} cores",
+        f" processes, {args.runs} run(s) each, on {os.cpu_count()} cores"
+        + (f", tracking command and target {args.delay:g} s later" if args.delay else ""),
         flush=True,
     )
     root = Path(tempfile.mkdtemp(prefix="bench-load-"))
