@@ -2,6 +2,7 @@
 
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
+      [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -26,10 +27,21 @@ segment's start and then straight on at its velocity there (what an estimator pr
 is not known), and starts the segment's oracle from where that leaves the team: the best a
 controller that tracks the 7 m/s leg optimally, but cannot see the turn coming, could do.
 
-Prints per seed the mission's figures, the oracle's, their ratio, and the team's state at the
-segment's start (distance errors, speeds, adjacent gaps); the means at the end. ``--run`` adds
-missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the simulator), read
-from their track.csv and summary.json.
+``--worst P`` replaces the distance term by mean (|d| / 20 m)^P: with a large even P (8) a soft
+maximum, so that the oracle looks for the least *largest* distance error any controller could
+fly (``--spacing-weight 0`` leaves spacing out: a lower bound for a team that also keeps it).
+``--causal S`` also flies a receding-horizon optimiser without foresight (``causal_flight``):
+every S s it optimises the same cost over the next ``--causal-horizon`` s (30) against the
+target carried on at its present velocity, and flies the first S s of that plan on the ideal
+airframes: what a controller that knows the target exactly *now*, but not what it will do next,
+could do. Between the two oracles lies the price of foresight; between the causal one and the
+mission, what a better causal controller could still gain.
+
+Prints per seed the mission's figures, the oracle's, their ratio, the largest distance errors
+(mission, oracle), and the team's state at the segment's start (distance errors, speeds,
+adjacent gaps); with ``--causal`` the causal optimiser's figures; the means at the end.
+``--run`` adds missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the
+simulator), read from their track.csv and summary.json.
 """
 
 import argparse
@@ -48,10 +60,12 @@ from app.compose.mission_fastsim import MissionSimSetup, run_mission_sim, track_
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import MissionPlan, build_plan
+from app.config.simulator import WindModel
 from app.core.frames import paper_angle_from_course
 from app.core.mission.team import TeamSample, VehicleSample
 
 Array = NDArray[np.float64]
+WORST_REF_M = 20.0  # what --worst divides the distance errors by
 BLIND_AFTER_S = 20.0  # how far past the segment's start the blind approach looks (straight on)
 
 
@@ -79,6 +93,11 @@ class Problem:
     dist_ref_m: float = 3.0
     spacing_ref_rad: float = math.radians(4.0)
     score_from: int = 1  # the first sample the cost counts (later: a lead-in before the segment)
+    dist_power: int = 2  # the distance term is mean(|d| / dist_ref_m)^dist_power
+    spacing_weight: float = 1.0  # 0: the spacing term is left out
+    # a steady wind (east, north) m/s: heading and speed are then the air's, and the wind
+    # carries every position along (it does not depend on the controls)
+    wind: tuple[float, float] = (0.0, 0.0)
 
     @property
     def steps(self) -> int:
@@ -125,6 +144,9 @@ def fly(problem: Problem, rate: Array, accel: Array) -> Flight:
     position = np.empty((n_steps + 1, p.count, 2))
     position[0] = p.position
     position[1:] = p.position + np.cumsum(step, axis=0)
+    if p.wind != (0.0, 0.0):
+        drift = np.outer(dt * np.arange(1, n_steps + 1), np.asarray(p.wind))
+        position[1:] += drift[:, None, :]
     return Flight(position, heading, speed, free)
 
 
@@ -150,15 +172,17 @@ def cost_and_gradient(x: Array, problem: Problem) -> tuple[float, Array]:
     e = r - p.radius_m
     k0 = p.score_from
     samples = (n_steps + 1 - k0) * n
-    wd = 1.0 / (p.dist_ref_m**2 * samples)
-    cost = wd * float(np.sum(e[k0:] ** 2))
+    q = p.dist_power
+    scaled = e[k0:] / p.dist_ref_m
+    cost = float(np.sum(np.abs(scaled) ** q)) / samples
+    d_e = q * np.abs(scaled) ** (q - 1) * np.sign(scaled) / (p.dist_ref_m * samples)
     grad_p = np.zeros_like(flight.position)
-    grad_p[k0:] = (2.0 * wd * e[k0:] / r[k0:])[..., None] * rel[k0:]
-    if n > 1:
+    grad_p[k0:] = (d_e / r[k0:])[..., None] * rel[k0:]
+    if n > 1 and p.spacing_weight > 0.0:
         nxt = p.successor()
         polar = np.arctan2(rel[..., 1], rel[..., 0])
         es = np.mod(polar[:, nxt] - polar, 2.0 * math.pi) - 2.0 * math.pi / n
-        ws = 1.0 / (p.spacing_ref_rad**2 * samples)
+        ws = p.spacing_weight / (p.spacing_ref_rad**2 * samples)
         cost += ws * float(np.sum(es[k0:] ** 2))
         d_gap = 2.0 * ws * es
         d_gap[:k0] = 0.0
@@ -187,6 +211,7 @@ def cost_and_gradient(x: Array, problem: Problem) -> tuple[float, Array]:
 class Oracle:
     dist_rms_m: float
     spacing_rms_deg: float
+    dist_max_m: float
     cost: float
     flight: Flight
     start: str
@@ -226,9 +251,76 @@ def solve(
             problem, x[:size].reshape(-1, problem.count), x[size:].reshape(-1, problem.count)
         )
         dist, spacing = figures(problem, flight)
-        found[name] = Oracle(dist, spacing, cost_and_gradient(x, problem)[0], flight, name)
+        worst = float(np.max(np.abs(errors(problem, flight)[0][problem.score_from :])))
+        found[name] = Oracle(dist, spacing, worst, cost_and_gradient(x, problem)[0], flight, name)
     best = min(found.values(), key=lambda o: o.cost)
     return best, found
+
+
+def causal_flight(
+    problem: Problem,
+    velocity: Array,
+    flown: Array,
+    replan_s: float,
+    horizon_s: float,
+    max_iter: int,
+) -> Flight:
+    """The team flown by a receding-horizon optimiser that knows the target only as it is now:
+    every ``replan_s`` it optimises ``problem``'s cost over the next ``horizon_s`` against the
+    target's present position and ``velocity`` (N + 1, 2) carried on at constant velocity (what
+    a perfect estimator, without foresight, predicts), and flies the plan's first ``replan_s``
+    before planning again. It starts each plan from the cheaper of the previous plan moved on
+    and the mission's own controls ``flown`` (as ``controls_of`` gives them) over the window.
+    Scored like the oracle, over ``problem``'s true path: a reference for what a controller
+    that learns the target's motion as it happens could do on ideal airframes."""
+    p, dt, n = problem, problem.dt_s, problem.count
+    steps = p.steps
+    every = max(1, round(replan_s / dt))
+    ahead = max(every, round(horizon_s / dt))
+    position = np.empty((steps + 1, n, 2))
+    heading = np.empty((steps + 1, n))
+    speed = np.empty((steps + 1, n))
+    position[0], heading[0], speed[0] = p.position, p.heading, p.speed
+    flown_rate = flown[: steps * n].reshape(steps, n)
+    flown_accel = flown[steps * n :].reshape(steps, n)
+    previous: tuple[Array, Array] | None = None
+    k = 0
+    while k < steps:
+        predicted = p.target[k] + velocity[k] * (dt * np.arange(ahead + 1))[:, None]
+        window = replace(
+            p,
+            position=position[k],
+            heading=heading[k],
+            speed=speed[k],
+            target=predicted,
+            score_from=1,
+        )
+        rows = np.minimum(np.arange(k, k + ahead), steps - 1)
+        starts = {"flown": np.concatenate([flown_rate[rows].ravel(), flown_accel[rows].ravel()])}
+        if previous is not None:
+            moved = np.minimum(np.arange(every, every + ahead), ahead - 1)
+            starts["previous"] = np.concatenate(
+                [previous[0][moved].ravel(), previous[1][moved].ravel()]
+            )
+        best, _ = solve(window, starts, max_iter)
+        f = best.flight
+        take = min(every, steps - k)
+        position[k + 1 : k + take + 1] = f.position[1 : take + 1]
+        heading[k + 1 : k + take + 1] = f.heading[1 : take + 1]
+        speed[k + 1 : k + take + 1] = f.speed[1 : take + 1]
+        previous = (np.diff(f.heading, axis=0) / dt, np.diff(f.speed, axis=0) / dt)
+        k += take
+    return Flight(position, heading, speed, np.ones((steps, n)))
+
+
+def air_state(sample: TeamSample, wind: tuple[float, float]) -> tuple[Array, Array]:
+    """The team's headings (rad counter-clockwise from east) and speeds through the air in a
+    steady ``wind`` (east, north m/s) from its ground courses and speeds."""
+    course = np.array([v.course_rad for v in sample.vehicles])
+    ground = np.array([v.speed_m_s for v in sample.vehicles])
+    east = ground * np.sin(course) - wind[0]
+    north = ground * np.cos(course) - wind[1]
+    return np.arctan2(north, east), np.hypot(east, north)
 
 
 def controls_of(samples: list[TeamSample], t0: float, problem: Problem) -> Array:
@@ -359,9 +451,12 @@ def case(
     args: argparse.Namespace,
     airframe: Airframe,
     seed: int,
-) -> tuple[float, float, float, float]:
+    mission_max_m: float = math.nan,
+) -> tuple[float, ...]:
     """The oracle from the team's state at the segment's start; prints and returns
-    (mission distance, mission spacing, oracle distance, oracle spacing)."""
+    (mission distance, mission spacing, oracle distance, oracle spacing) RMS, the largest
+    distance errors (mission's, ``mission_max_m`` where known, then the oracle's), and the
+    causal optimiser's distance, spacing and largest error (nan without ``--causal``)."""
     t_start = time.perf_counter()
     seg = [s for s in samples if s.target_segment == args.segment]
     t0, t1 = seg[0].t_s - args.lead, seg[-1].t_s
@@ -369,16 +464,26 @@ def case(
     t0 = first.t_s
     steps = round((t1 - t0) / args.dt)
     path = [plan.target.state_at(t0 + k * args.dt) for k in range(steps + 1)]
+    wind = getattr(args, "steady_wind", (0.0, 0.0))
+    heading, speed = air_state(first, wind)
     problem = Problem(
         position=np.array([[v.east_m, v.north_m] for v in first.vehicles]),
-        heading=np.array([paper_angle_from_course(v.course_rad) for v in first.vehicles]),
-        speed=np.array([v.speed_m_s for v in first.vehicles]),
+        heading=heading,
+        speed=np.clip(speed, airframe.min_speed_m_s, airframe.max_speed_m_s),
         target=np.array([[p.east_m, p.north_m] for p in path]),
         dt_s=args.dt,
         radius_m=plan.config.radius_m,
         airframe=airframe,
         score_from=max(1, round((seg[0].t_s - t0) / args.dt)),
+        wind=wind,
     )
+    if getattr(args, "worst", None):
+        problem = replace(
+            problem,
+            dist_power=args.worst,
+            dist_ref_m=WORST_REF_M,
+            spacing_weight=getattr(args, "spacing_weight", 1.0),
+        )
     n = problem.count
     approach = None
     if args.blind > 0.0 and args.lead == 0.0:
@@ -417,7 +522,36 @@ def case(
         f"{mission[1] / best.spacing_rms_deg:.2f}  [{time.perf_counter() - t_start:.0f} s]",
         flush=True,
     )
-    return mission[0], mission[1], best.dist_rms_m, best.spacing_rms_deg
+    print(
+        f"  largest distance error: mission {mission_max_m:6.2f} m | oracle "
+        f"{best.dist_max_m:6.2f} m | mission/oracle {mission_max_m / best.dist_max_m:.2f}"
+    )
+    causal = (math.nan, math.nan, math.nan)
+    if getattr(args, "causal", 0.0) > 0.0 and args.lead == 0.0 and not approach:
+        t_causal = time.perf_counter()
+        velocity = np.array([[q.v_east_m_s, q.v_north_m_s] for q in path])
+        flight = causal_flight(
+            problem, velocity, flown, args.causal, args.causal_horizon, args.causal_iter
+        )
+        dist, spacing = figures(problem, flight)
+        worst = float(np.max(np.abs(errors(problem, flight)[0][problem.score_from :])))
+        causal = (dist, spacing, worst)
+        print(
+            f"  causal (replanned every {args.causal:g} s, {args.causal_horizon:g} s ahead on "
+            f"the target's present velocity): {dist:6.2f} m {spacing:5.2f} deg, largest "
+            f"{worst:6.2f} m | mission/causal {mission[0] / dist:.2f} {mission[1] / spacing:.2f}, "
+            f"largest {mission_max_m / worst:.2f}  [{time.perf_counter() - t_causal:.0f} s]",
+            flush=True,
+        )
+    return (
+        mission[0],
+        mission[1],
+        best.dist_rms_m,
+        best.spacing_rms_deg,
+        mission_max_m,
+        best.dist_max_m,
+        *causal,
+    )
 
 
 def main() -> None:
@@ -452,6 +586,40 @@ def main() -> None:
         "--perturbed", type=int, default=2, help="extra starts: the flown controls plus noise"
     )
     ap.add_argument(
+        "--worst",
+        type=int,
+        metavar="P",
+        help=f"minimise mean (|d| / {WORST_REF_M:g} m)^P instead of (|d| / 3 m)^2: with a large "
+        "even P, the largest distance error (a soft maximum)",
+    )
+    ap.add_argument(
+        "--spacing-weight",
+        type=float,
+        default=1.0,
+        help="weight of the spacing term (0: distance only)",
+    )
+    ap.add_argument(
+        "--causal",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="also fly the receding-horizon optimiser without foresight, replanning every S s "
+        "on the target's present velocity (0: not flown)",
+    )
+    ap.add_argument("--causal-horizon", type=float, default=30.0, metavar="H")
+    ap.add_argument("--causal-iter", type=int, default=300)
+    ap.add_argument(
+        "--wind",
+        type=float,
+        nargs=2,
+        metavar=("SPEED", "TOWARD_DEG"),
+        help="fly the mission in this steady wind (m/s, blowing toward deg from north) and the "
+        "oracles in it too",
+    )
+    ap.add_argument(
+        "--gusts", type=float, default=0.0, help="the mission's gusts with --wind (m/s, 0)"
+    )
+    ap.add_argument(
         "--planner",
         choices=("field", "horizon"),
         default=None,
@@ -462,14 +630,36 @@ def main() -> None:
     if args.planner is not None:
         guidance = base.guidance.model_copy(update={"track_planner": args.planner})
         base = base.model_copy(update={"guidance": guidance})
+    args.steady_wind = (0.0, 0.0)
+    if args.wind is not None:
+        if args.blind > 0.0:
+            ap.error("--wind does not go with --blind")
+        speed, toward = args.wind
+        model = WindModel(speed_m_s=speed, toward_deg=toward, gust_sigma_m_s=args.gusts)
+        base = base.model_copy(update={"sim": base.sim.model_copy(update={"wind": model})})
+        steady = model.build()
+        args.steady_wind = (steady.east_m_s, steady.north_m_s)
     lim = base.limits
     airframe = Airframe(
         lim.min_speed_m_s, lim.max_speed_m_s, lim.max_accel_m_s2, lim.max_course_rate_rad_s
     )
     print(
-        f"{args.config}: segment {args.segment}, fast-sim seeds {args.seeds} (tracking command "
+        f"{args.config}: segment {args.segment}"
+        + (
+            f", in a wind of {args.wind[0]:g} m/s toward {args.wind[1]:g} deg (gusts "
+            f"{args.gusts:g} m/s in the mission only)"
+            if args.wind
+            else ""
+        )
+        + f", fast-sim seeds {args.seeds} (tracking command "
         f"+{args.vary_command:g} s per seed), runs {[str(r) for r in args.run]}, oracle step "
-        f"{args.dt:g} s; cost = mean d^2/(3 m)^2 + mean spacing^2/(4 deg)^2"
+        f"{args.dt:g} s; cost = "
+        + (f"mean (|d| / {WORST_REF_M:g} m)^{args.worst}" if args.worst else "mean d^2/(3 m)^2")
+        + (
+            f" + {args.spacing_weight:g} mean spacing^2/(4 deg)^2"
+            if args.spacing_weight > 0.0
+            else ""
+        )
     )
     rows = []
     for seed in args.seeds:
@@ -480,19 +670,49 @@ def main() -> None:
         result = run_mission_sim(MissionSimSetup(plan, seed=seed))
         figs = track_figures(result, plan.target.labels)[args.segment]
         mission = (figs["dist_rms_m"], figs["spacing_rms_deg"])
-        rows.append(case(f"seed {seed}", result.samples, plan, mission, args, airframe, seed))
+        rows.append(
+            case(
+                f"seed {seed}",
+                result.samples,
+                plan,
+                mission,
+                args,
+                airframe,
+                seed,
+                figs["dist_max_m"],
+            )
+        )
     plan = build_plan(base)
     for i, run_dir in enumerate(args.run):
         samples = run_samples(run_dir, plan)
         mission = run_figures(run_dir, args.segment)
-        rows.append(case(f"run {run_dir}", samples, plan, mission, args, airframe, 100 + i))
-    m = np.mean(np.array(rows), axis=0)
+        summary = json.loads((run_dir / "summary.json").read_text())
+        worst = summary["parts"][f"track:{args.segment}"]["team"]["distance_error_m"]
+        rows.append(
+            case(
+                f"run {run_dir}",
+                samples,
+                plan,
+                mission,
+                args,
+                airframe,
+                100 + i,
+                float(worst.get("max_abs", math.nan)),
+            )
+        )
+    m = np.mean(np.array(rows), axis=0)  # the causal columns are nan where not flown
     met = sum(1 for r in rows if r[2] <= 3.0 and r[3] <= 4.0)
     print(
         f"mean: mission {m[0]:.2f} m {m[1]:.2f} deg, oracle {m[2]:.2f} m {m[3]:.2f} deg, "
         f"mission/oracle {m[0] / m[2]:.2f} {m[1] / m[3]:.2f}; the oracle meets <= 3 m and <= 4 deg "
-        f"in {met} of {len(rows)}"
+        f"in {met} of {len(rows)}; largest distance error: mission {m[4]:.2f} m, oracle "
+        f"{m[5]:.2f} m, mission/oracle {m[4] / m[5]:.2f}"
     )
+    if args.causal > 0.0:
+        print(
+            f"mean causal: {m[6]:.2f} m {m[7]:.2f} deg, largest {m[8]:.2f} m; mission/causal "
+            f"{m[0] / m[6]:.2f} {m[1] / m[7]:.2f}, largest {m[4] / m[8]:.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ that it finds what is known to be possible."""
 import argparse
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,11 +12,15 @@ import pytest
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
+from app.core.mission.team import TeamSample, VehicleSample
 from benchmarks.bench_oracle import (
     Airframe,
     Problem,
+    air_state,
     case,
+    causal_flight,
     cost_and_gradient,
+    figures,
     fly,
     run_figures,
     run_samples,
@@ -25,8 +30,17 @@ from benchmarks.bench_oracle import (
 AIRFRAME = Airframe(10.0, 18.0, 2.0, 0.2)
 
 
-@pytest.mark.parametrize("score_from", [1, 7])
-def test_the_gradient_is_the_costs_derivative(score_from):
+@pytest.mark.parametrize(
+    ("score_from", "power", "spacing_weight", "wind"),
+    [
+        (1, 2, 1.0, (0.0, 0.0)),
+        (7, 2, 1.0, (0.0, 0.0)),
+        (1, 8, 0.0, (0.0, 0.0)),
+        (7, 8, 0.5, (0.0, 0.0)),
+        (1, 2, 1.0, (2.1, -2.1)),
+    ],
+)
+def test_the_gradient_is_the_costs_derivative(score_from, power, spacing_weight, wind):
     rng = np.random.default_rng(3)
     steps, n = 40, 3
     problem = Problem(
@@ -38,10 +52,17 @@ def test_the_gradient_is_the_costs_derivative(score_from):
         radius_m=90.0,
         airframe=AIRFRAME,
         score_from=score_from,
+        dist_power=power,
+        dist_ref_m=3.0 if power == 2 else 60.0,  # the eighth power's cost ~1 here
+        spacing_weight=spacing_weight,
+        wind=wind,
     )
     x = np.concatenate([rng.uniform(-0.2, 0.2, steps * n), rng.uniform(-2.0, 2.0, steps * n)])
     _, grad = cost_and_gradient(x, problem)
     h = 1e-4  # the cost is ~4e3: a smaller step drowns the difference in rounding
+    # the eighth power's elements span nine orders of magnitude: the tiny ones are compared
+    # against the largest
+    floor = 1e-8 if power == 2 else 1e-7 * float(np.abs(grad).max())
     for i in rng.choice(x.size, 20, replace=False):
         up, down = x.copy(), x.copy()
         up[i] += h
@@ -49,7 +70,7 @@ def test_the_gradient_is_the_costs_derivative(score_from):
         numeric = (cost_and_gradient(up, problem)[0] - cost_and_gradient(down, problem)[0]) / (
             2 * h
         )
-        assert math.isclose(grad[i], numeric, rel_tol=1e-5, abs_tol=1e-8), i
+        assert math.isclose(grad[i], numeric, rel_tol=1e-5, abs_tol=floor), i
 
 
 def test_it_finds_the_orbit_a_vehicle_on_the_circle_can_hold():
@@ -134,10 +155,116 @@ def test_a_flown_run_folder_is_read_and_its_segment_handed_to_the_oracle(tmp_pat
     args = argparse.Namespace(segment="B-C", lead=0.0, blind=0.0, dt=0.2, perturbed=0, max_iter=200)
     limits = plan.config.limits
     airframe = Airframe(limits.min_speed_m_s, limits.max_speed_m_s, limits.max_accel_m_s2, 0.2)
-    mission_d, mission_s, oracle_d, oracle_s = case(
+    mission_d, mission_s, oracle_d, oracle_s, *_ = case(
         "run", samples, plan, (5.0, 2.0), args, airframe, 0
     )
     assert (mission_d, mission_s) == (5.0, 2.0)
     assert oracle_d < 1.0
     assert oracle_s < 1.0
     assert "mission/oracle" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_the_soft_maximum_trades_the_mean_for_the_largest_error():
+    # One vehicle at the front of the circle, flying its tangent, as the target drives at it at
+    # 7 m/s (too fast for the circle: the vehicle must swing wide behind it). Minimising the
+    # eighth power of the error instead of its square gives a smaller largest error, paid for
+    # with a larger RMS.
+    dt, steps = 0.2, 300
+    t = dt * np.arange(steps + 1)
+    base = Problem(
+        position=np.array([[0.0, 90.0]]),
+        heading=np.array([math.pi]),
+        speed=np.array([14.0]),
+        target=np.stack([0.0 * t, 7.0 * t], axis=1),
+        dt_s=dt,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+    )
+    start = {"straight": np.zeros(2 * steps)}
+    mean_square, _ = solve(base, start)
+    soft_max, _ = solve(replace(base, dist_power=8, dist_ref_m=20.0), start)
+    assert soft_max.dist_max_m < mean_square.dist_max_m - 0.1
+    assert soft_max.dist_rms_m > mean_square.dist_rms_m
+    rel = soft_max.flight.position[1:, 0] - base.target[1:]
+    assert soft_max.dist_max_m == pytest.approx(
+        float(np.max(np.abs(np.linalg.norm(rel, axis=-1) - 90.0)))
+    )
+
+
+@pytest.mark.slow
+def test_the_causal_optimiser_learns_a_turn_only_when_it_happens():
+    # One vehicle holding the circle round a target that drives east at 5 m/s and turns north
+    # 20 s in. Knowing the turn (the oracle) it prepares for it; replanning every second on the
+    # target's present velocity (the causal optimiser) it cannot, and it ends up further off.
+    # Both stay within the airframe's limits; on a target that never turns the two nearly agree.
+    dt, steps = 0.5, 100
+    t = dt * np.arange(steps + 1)
+    turn = 20.0
+    velocity = np.where((t < turn)[:, None], [5.0, 0.0], [0.0, 5.0])
+    target = np.cumsum(np.vstack([[0.0, 0.0], velocity[:-1] * dt]), axis=0)
+    problem = Problem(
+        position=np.array([[0.0, -90.0]]),
+        heading=np.array([0.0]),
+        speed=np.array([14.0]),
+        target=target,
+        dt_s=dt,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+    )
+    flown = np.zeros(2 * steps)
+    oracle, _ = solve(problem, {"straight": flown}, max_iter=600)
+    causal = causal_flight(problem, velocity, flown, 2.0, 16.0, 100)
+    causal_rms, _ = figures(problem, causal)
+    assert causal_rms > oracle.dist_rms_m + 0.5
+    rates = np.diff(causal.heading, axis=0) / dt
+    assert np.abs(rates).max() <= 0.2 + 1e-9
+    assert causal.speed.min() >= 10.0 - 1e-9
+    assert causal.speed.max() <= 18.0 + 1e-9
+
+    straight = np.tile([5.0, 0.0], (steps + 1, 1))
+    steady = replace(problem, target=np.cumsum(np.vstack([[0.0, 0.0], straight[:-1] * dt]), axis=0))
+    steady_oracle, _ = solve(steady, {"straight": flown}, max_iter=600)
+    steady_causal = causal_flight(steady, straight, flown, 2.0, 16.0, 100)
+    assert figures(steady, steady_causal)[0] < steady_oracle.dist_rms_m + 1.5
+
+
+def test_the_wind_carries_the_airframes_and_the_start_is_taken_through_the_air():
+    # 10 s straight east at 12 m/s through the air in a wind toward the north-east: the
+    # airframe ends 120 m east plus the wind's 10 s of drift
+    steps = 50
+    problem = Problem(
+        position=np.array([[5.0, -7.0]]),
+        heading=np.array([0.0]),
+        speed=np.array([12.0]),
+        target=np.zeros((steps + 1, 2)),
+        dt_s=0.2,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+        wind=(2.0, 2.0),
+    )
+    flight = fly(problem, np.zeros((steps, 1)), np.zeros((steps, 1)))
+    assert flight.position[-1, 0] == pytest.approx([5.0 + 120.0 + 20.0, -7.0 + 20.0])
+    # a vehicle flying north-east at 15 m/s over the ground in that wind makes 15 - 2.83 m/s
+    # through the air, heading north-east; one flying south-east crabs into it
+    sample = TeamSample(
+        0.0,
+        "track",
+        "A-B",
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        None,
+        (
+            VehicleSample(0, True, 0.0, 0.0, 15.0, math.radians(45.0)),
+            VehicleSample(1, True, 0.0, 0.0, 15.0, math.radians(135.0)),
+        ),
+    )
+    heading, speed = air_state(sample, (2.0, 2.0))
+    assert heading[0] == pytest.approx(math.radians(45.0))
+    assert speed[0] == pytest.approx(15.0 - math.hypot(2.0, 2.0))
+    ground = speed[1] * np.array([math.cos(heading[1]), math.sin(heading[1])]) + [2.0, 2.0]
+    assert ground == pytest.approx(
+        15.0 * np.array([math.sin(math.radians(135.0)), math.cos(math.radians(135.0))])
+    )
