@@ -1,0 +1,96 @@
+"""The formation-time bounds of benchmarks/bench_gather_bound.py: shortest paths that really join
+their poses, and the two ways of joining a team to the circle."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_gather_bound import (
+    dubins,
+    dubins_words,
+    follow,
+    gather_times,
+    run_starts,
+    seat_pose,
+)
+
+R = 90.0
+
+
+def _same_pose(a, b):
+    heading = (a[2] - b[2] + math.pi) % (2 * math.pi) - math.pi
+    return math.hypot(a[0] - b[0], a[1] - b[1]) < 1e-6 and abs(heading) < 1e-9
+
+
+def test_every_word_found_flies_from_the_start_to_the_goal():
+    rng = np.random.default_rng(7)
+    words = set()
+    for _ in range(300):
+        start = (*rng.uniform(-300.0, 300.0, 2), rng.uniform(-4.0, 4.0))
+        goal = (*rng.uniform(-300.0, 300.0, 2), rng.uniform(-4.0, 4.0))
+        found = dubins_words(start, goal, R)
+        assert found
+        for path in found:
+            words.add(path.word)
+            assert _same_pose(follow(start, path, R), goal), path
+            assert path.length_m >= math.hypot(goal[0] - start[0], goal[1] - start[1]) - 1e-9
+        assert dubins(start, goal, R).length_m == min(p.length_m for p in found)
+    assert words == {"LSL", "RSR", "LSR", "RSL", "RLR", "LRL"}
+
+
+def test_the_shortest_paths_of_known_cases():
+    # straight on
+    path = dubins((0.0, 0.0, 0.0), (500.0, 0.0, 0.0), R)
+    assert path.length_m == pytest.approx(500.0)
+    # a U-turn onto the parallel line two radii to the left: half a circle
+    assert dubins((0.0, 0.0, 0.0), (0.0, 2 * R, math.pi), R).length_m == pytest.approx(math.pi * R)
+    # a quarter turn left onto a point a radius ahead and a radius to the left
+    assert dubins((0.0, 0.0, 0.0), (R, R, math.pi / 2), R).length_m == pytest.approx(
+        math.pi * R / 2
+    )
+    with pytest.raises(ValueError):
+        dubins((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.0)
+
+
+def test_a_seat_each_is_never_slower_than_one_joining_point():
+    # three vehicles together 1 km west of the circle, flying east: with one joining point the
+    # last joins two spacing gaps (2 x 188.5 m of arc at 18 m/s) after the first can get there
+    centre, speed = (0.0, 0.0), 18.0
+    start = (-1000.0, 0.0, 0.0)
+    one, each = gather_times([start] * 3, centre, 90.0, 1, speed, R)
+    first = min(
+        dubins(start, seat_pose(centre, 90.0, math.radians(k), 1), R).length_m for k in range(360)
+    )
+    assert one == pytest.approx(first / speed + 2 * (2 * math.pi * 90.0 / 3) / speed)
+    assert first / speed <= each < one
+    # alone, there is nothing to space: both are the quickest way onto the circle
+    alone = gather_times([start], centre, 90.0, 1, speed, R)
+    assert alone[0] == pytest.approx(first / speed)
+    assert alone[1] == pytest.approx(first / speed)
+    # the seat on the far side of the circle is joined clockwise by a clockwise team
+    cw_one, cw_each = gather_times([start] * 3, centre, 90.0, -1, speed, R)
+    assert cw_one == pytest.approx(one, rel=0.02)
+    assert cw_each == pytest.approx(each, rel=0.02)
+    with pytest.raises(ValueError):
+        gather_times([], centre, 90.0, 1, speed, R)
+
+
+def test_the_team_at_the_tracking_command_is_read_from_a_run_folder(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps({"mission": {"tracking_command_s": 10.0}}))
+    (tmp_path / "summary.json").write_text(
+        json.dumps({"convergence": {"time_to_formation_s": 71.5}})
+    )
+    rows = ["t_s,vehicle,east_m,north_m,course_rad,speed_m_s"]
+    for t in (9.9, 10.0, 10.1):
+        for v in (2, 1):
+            rows.append(f"{t},{v},{-1000.0 + t + v},{5.0 * v},{0.5 * v},14.0")
+    (tmp_path / "track.csv").write_text("\n".join(rows) + "\n")
+    starts, command, formed = run_starts(tmp_path)
+    assert command == 10.0
+    assert formed == 71.5
+    assert starts == [
+        pytest.approx((-989.0, 5.0, math.pi / 2 - 0.5)),
+        pytest.approx((-988.0, 10.0, math.pi / 2 - 1.0)),
+    ]
