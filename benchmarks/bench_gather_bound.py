@@ -25,119 +25,18 @@ that joins the whole team at one point. Prints both per start point, and their m
 
 import argparse
 import csv
-import itertools
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 from app.config import load_config
 from app.config.mission import MissionConfig
-
-TAU = 2.0 * math.pi
-EPS = 1e-9  # a word whose square root's argument is this far below 0 is one of length 0
-
-
-@dataclass(frozen=True, slots=True)
-class DubinsPath:
-    """A shortest path: its ``word`` (L: left arc, R: right arc, S: straight), the three
-    segments' lengths in units of the turn radius, and its length in metres."""
-
-    word: str
-    segments: tuple[float, float, float]
-    length_m: float
-
-
-def _mod(angle: float) -> float:
-    return angle % TAU
-
-
-def dubins(
-    start: tuple[float, float, float], goal: tuple[float, float, float], radius_m: float
-) -> DubinsPath:
-    """The shortest path from ``start`` to ``goal`` (east m, north m, heading rad counter-
-    clockwise from east) with turns no tighter than ``radius_m``: the shortest of the six
-    Dubins words (``dubins_words``)."""
-    return min(dubins_words(start, goal, radius_m), key=lambda p: p.length_m)
-
-
-def dubins_words(
-    start: tuple[float, float, float], goal: tuple[float, float, float], radius_m: float
-) -> list[DubinsPath]:
-    """Every Dubins word (LSL, RSR, LSR, RSL, RLR, LRL) that joins ``start`` to ``goal``."""
-    if not (math.isfinite(radius_m) and radius_m > 0.0):
-        raise ValueError(f"radius_m must be finite and > 0, got {radius_m!r}")
-    dx, dy = goal[0] - start[0], goal[1] - start[1]
-    d = math.hypot(dx, dy) / radius_m
-    theta = math.atan2(dy, dx) if d > 0.0 else 0.0
-    a, b = _mod(start[2] - theta), _mod(goal[2] - theta)
-    sa, sb, ca, cb = math.sin(a), math.sin(b), math.cos(a), math.cos(b)
-    cab = math.cos(a - b)
-    found: list[tuple[str, tuple[float, float, float]]] = []
-    p2 = 2.0 + d * d - 2.0 * cab + 2.0 * d * (sa - sb)
-    if p2 >= -EPS:
-        t = math.atan2(cb - ca, d + sa - sb)
-        found.append(("LSL", (_mod(t - a), math.sqrt(max(p2, 0.0)), _mod(b - t))))
-    p2 = 2.0 + d * d - 2.0 * cab + 2.0 * d * (sb - sa)
-    if p2 >= -EPS:
-        t = math.atan2(ca - cb, d - sa + sb)
-        found.append(("RSR", (_mod(a - t), math.sqrt(max(p2, 0.0)), _mod(t - b))))
-    p2 = -2.0 + d * d + 2.0 * cab + 2.0 * d * (sa + sb)
-    if p2 >= -EPS:
-        p = math.sqrt(max(p2, 0.0))
-        t = math.atan2(-ca - cb, d + sa + sb) - math.atan2(-2.0, p)
-        found.append(("LSR", (_mod(t - a), p, _mod(t - b))))
-    p2 = d * d - 2.0 + 2.0 * cab - 2.0 * d * (sa + sb)
-    if p2 >= -EPS:
-        p = math.sqrt(max(p2, 0.0))
-        t = math.atan2(ca + cb, d - sa - sb) - math.atan2(2.0, p)
-        found.append(("RSL", (_mod(a - t), p, _mod(b - t))))
-    q = (6.0 - d * d + 2.0 * cab + 2.0 * d * (sa - sb)) / 8.0
-    if abs(q) <= 1.0 + EPS:
-        p = _mod(TAU - math.acos(min(max(q, -1.0), 1.0)))
-        t = _mod(a - math.atan2(ca - cb, d - sa + sb) + p / 2.0)
-        found.append(("RLR", (t, p, _mod(a - b - t + p))))
-    q = (6.0 - d * d + 2.0 * cab + 2.0 * d * (sb - sa)) / 8.0
-    if abs(q) <= 1.0 + EPS:
-        p = _mod(TAU - math.acos(min(max(q, -1.0), 1.0)))
-        t = _mod(-a + math.atan2(-ca + cb, d + sa - sb) + p / 2.0)
-        found.append(("LRL", (t, p, _mod(b - a - t + p))))
-    return [DubinsPath(word, seg, sum(seg) * radius_m) for word, seg in found]
-
-
-def follow(
-    start: tuple[float, float, float], path: DubinsPath, radius_m: float
-) -> tuple[float, float, float]:
-    """Where flying ``path`` from ``start`` ends (east, north, heading), arc by arc."""
-    x, y, h = start
-    for letter, length in zip(path.word, path.segments, strict=True):
-        if letter == "S":
-            x += length * radius_m * math.cos(h)
-            y += length * radius_m * math.sin(h)
-            continue
-        turn = length if letter == "L" else -length
-        side = 1.0 if letter == "L" else -1.0
-        cx, cy = x - side * radius_m * math.sin(h), y + side * radius_m * math.cos(h)
-        h2 = h + turn
-        x, y = cx + side * radius_m * math.sin(h2), cy - side * radius_m * math.cos(h2)
-        h = h2
-    return x, y, _mod(h + math.pi) - math.pi
-
-
-def seat_pose(
-    centre: tuple[float, float], radius_m: float, angle_rad: float, sign: int
-) -> tuple[float, float, float]:
-    """The pose on the circle at polar ``angle_rad``, flying it (sign +1 counter-clockwise)."""
-    return (
-        centre[0] + radius_m * math.cos(angle_rad),
-        centre[1] + radius_m * math.sin(angle_rad),
-        angle_rad + sign * math.pi / 2.0,
-    )
+from app.core.guidance.dubins import MAX_JOIN_TEAM, TAU, Pose, dubins, join_plan, seat_pose
 
 
 def gather_times(
-    starts: Sequence[tuple[float, float, float]],
+    starts: Sequence[Pose],
     centre: tuple[float, float],
     radius_m: float,
     sign: int,
@@ -147,11 +46,11 @@ def gather_times(
     """(one joining point, a seat each): the seconds until a team starting at ``starts`` (one
     pose per vehicle) is on the circle and spaced, flying ``speed_m_s`` (see the module). With
     one joining point the vehicles join in the order they can get there, each at least
-    (2 pi r_d / n) / v after the one before; with a seat each, every assignment of vehicles to
-    seats is tried (teams of up to 7)."""
+    (2 pi r_d / n) / v after the one before; with a seat each, ``dubins.join_plan`` (teams of
+    up to ``MAX_JOIN_TEAM``)."""
     n = len(starts)
-    if not 1 <= n <= 7:
-        raise ValueError(f"1 to 7 vehicles, got {n}")
+    if not 1 <= n <= MAX_JOIN_TEAM:
+        raise ValueError(f"1 to {MAX_JOIN_TEAM} vehicles, got {n}")
     seats = [seat_pose(centre, radius_m, math.radians(k), sign) for k in range(360)]
     times = [
         [dubins(start, seat, turn_radius_m).length_m / speed_m_s for seat in seats]
@@ -163,24 +62,17 @@ def gather_times(
         arrivals = sorted(t[k] for t in times)
         first = max(a - j * gap_s for j, a in enumerate(arrivals))
         one_point = min(one_point, first + (n - 1) * gap_s)
-    each = math.inf
-    for k in range(360):
-        angles = [round(k + 360.0 * j / n) % 360 for j in range(n)]
-        for order in itertools.permutations(range(n)):
-            slowest = max(times[v][angles[j]] for j, v in enumerate(order))
-            each = min(each, slowest)
+    each = join_plan(starts, centre, radius_m, sign, speed_m_s, turn_radius_m, band_s=0.0).time_s
     return one_point, each
 
 
-def run_starts(
-    run_dir: Path,
-) -> tuple[list[tuple[float, float, float]], float, float | None]:
+def run_starts(run_dir: Path) -> tuple[list[Pose], float, float | None]:
     """A run folder's team at the tracking command (each vehicle's first track.csv row from
     then on: east, north, heading counter-clockwise from east), the command's time and the
     formation time it measured (s after the command; None: never)."""
     mission = json.loads((run_dir / "config.json").read_text())["mission"]
     command = float(mission["tracking_command_s"])
-    starts: dict[int, tuple[float, float, float]] = {}
+    starts: dict[int, Pose] = {}
     with (run_dir / "track.csv").open() as f:
         for row in csv.DictReader(f):
             vehicle = int(row["vehicle"])

@@ -60,7 +60,12 @@ class MissionGuidanceConfig(GuidanceConfig):
     rates and speeds ``track_horizon_s`` ahead on the target estimate and fly the plan
     (``horizon``, receding horizon, replanned every ``track_replan_s``; speed-honouring
     autopilots only: a vehicle whose phase actuator is the orbit radius keeps the field);
-    ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon"."""
+    ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon".
+    ``gather_join``: in gather, fly each vehicle to a seat of its own on the circle, planned
+    for the team at the tracking command so that the slowest arrives as soon as it can
+    (``seat``; teams of 2 to 5, larger ones join at one point), or let the field bring the whole
+    team to the circle at one point and space it there (``point``, the paper's);
+    ``app.core.guidance.dubins``, docs/mission.md "Gather"."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
@@ -76,6 +81,7 @@ class MissionGuidanceConfig(GuidanceConfig):
     track_planner: Literal["field", "horizon"] = "field"
     track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=2.0)] = 40.0
     track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 2.0
+    gather_join: Literal["point", "seat"] = "seat"
 
     @field_validator("track_turn_slow_deg")
     @classmethod

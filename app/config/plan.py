@@ -116,6 +116,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 fly_identified=g.course_loop_identification == "fly",
                 wind=None if g.wind == "off" else WindParams(air_frame=g.wind == "estimate"),
                 separation=config.separation.build(),
+                gather_join=g.gather_join,
             )
             for i in range(n)
         )

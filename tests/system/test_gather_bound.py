@@ -4,54 +4,12 @@ their poses, and the two ways of joining a team to the circle."""
 import json
 import math
 
-import numpy as np
 import pytest
 
-from benchmarks.bench_gather_bound import (
-    dubins,
-    dubins_words,
-    follow,
-    gather_times,
-    run_starts,
-    seat_pose,
-)
+from app.core.guidance.dubins import dubins, seat_pose
+from benchmarks.bench_gather_bound import gather_times, run_starts
 
 R = 90.0
-
-
-def _same_pose(a, b):
-    heading = (a[2] - b[2] + math.pi) % (2 * math.pi) - math.pi
-    return math.hypot(a[0] - b[0], a[1] - b[1]) < 1e-6 and abs(heading) < 1e-9
-
-
-def test_every_word_found_flies_from_the_start_to_the_goal():
-    rng = np.random.default_rng(7)
-    words = set()
-    for _ in range(300):
-        start = (*rng.uniform(-300.0, 300.0, 2), rng.uniform(-4.0, 4.0))
-        goal = (*rng.uniform(-300.0, 300.0, 2), rng.uniform(-4.0, 4.0))
-        found = dubins_words(start, goal, R)
-        assert found
-        for path in found:
-            words.add(path.word)
-            assert _same_pose(follow(start, path, R), goal), path
-            assert path.length_m >= math.hypot(goal[0] - start[0], goal[1] - start[1]) - 1e-9
-        assert dubins(start, goal, R).length_m == min(p.length_m for p in found)
-    assert words == {"LSL", "RSR", "LSR", "RSL", "RLR", "LRL"}
-
-
-def test_the_shortest_paths_of_known_cases():
-    # straight on
-    path = dubins((0.0, 0.0, 0.0), (500.0, 0.0, 0.0), R)
-    assert path.length_m == pytest.approx(500.0)
-    # a U-turn onto the parallel line two radii to the left: half a circle
-    assert dubins((0.0, 0.0, 0.0), (0.0, 2 * R, math.pi), R).length_m == pytest.approx(math.pi * R)
-    # a quarter turn left onto a point a radius ahead and a radius to the left
-    assert dubins((0.0, 0.0, 0.0), (R, R, math.pi / 2), R).length_m == pytest.approx(
-        math.pi * R / 2
-    )
-    with pytest.raises(ValueError):
-        dubins((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.0)
 
 
 def test_a_seat_each_is_never_slower_than_one_joining_point():

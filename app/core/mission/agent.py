@@ -32,6 +32,7 @@ state (``MissionAgentState.estimates``, ``.statuses``).
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,6 +56,15 @@ from app.core.estimation.models import MotionModel
 from app.core.frames import wrap_pi
 from app.core.guidance import course_id as cid
 from app.core.guidance import wind as wind_fit
+from app.core.guidance.course import course_command
+from app.core.guidance.dubins import (
+    MAX_JOIN_TEAM,
+    dubins,
+    flight_time,
+    join_plan,
+    sample_path,
+    seat_pose,
+)
 from app.core.mission.schedule import Every
 from app.core.mission.separation import SeparationParams, Traffic, resolve
 from app.core.mission.stage import Stage
@@ -62,6 +72,10 @@ from app.core.mission.team import dead_reckon
 from app.core.phase import circle_ground_speed_in_wind
 
 FloatArray = NDArray[np.float64]
+
+
+#: how gather joins the team to the circle (``MissionAgentParams.gather_join``)
+GatherJoin = Literal["point", "seat"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,9 +169,13 @@ class MissionAgentParams:
     ground_silent_hold_s: float = 60.0
     wind: wind_fit.WindParams | None = None
     separation: SeparationParams | None = None
+    gather_join: GatherJoin = "point"
+    join_handover_m: float = 20.0
 
     def __post_init__(self) -> None:
-        for name in ("max_ahead_s", "fused_gate_nis", "ground_silent_hold_s"):
+        if self.gather_join not in ("point", "seat"):
+            raise ValueError(f"gather_join must be 'point' or 'seat', got {self.gather_join!r}")
+        for name in ("max_ahead_s", "fused_gate_nis", "ground_silent_hold_s", "join_handover_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -192,6 +210,53 @@ class TunedLoop:
     flown_gain_per_s: float
     base: MissionAgentParams
     flown: MissionAgentParams
+
+
+@dataclass(frozen=True, slots=True)
+class JoinPath:
+    """One member's path to its seat (``dubins.sample_path``: east, north, heading, curvature),
+    its length (m), the mean ground speed the plan flies it at (m/s) and the index of the
+    point the member was nearest when last looked at."""
+
+    points: tuple[tuple[float, float, float, float], ...]
+    length_m: float
+    speed_m_s: float
+    progress: int = 0
+
+    @property
+    def step_m(self) -> float:
+        return self.length_m / max(len(self.points) - 1, 1)
+
+    def nearest(self, east_m: float, north_m: float) -> tuple["JoinPath", float]:
+        """The path with its progress moved to the point nearest (east, north), searched up
+        to 200 m ahead of the last one, and the distance to it (m)."""
+        pts = self.points
+        window = range(self.progress, min(len(pts) - 1, self.progress + 100) + 1)
+        k = min(window, key=lambda i: (pts[i][0] - east_m) ** 2 + (pts[i][1] - north_m) ** 2)
+        off = math.hypot(pts[k][0] - east_m, pts[k][1] - north_m)
+        return (self if k == self.progress else replace(self, progress=k)), off
+
+    def remaining_m(self) -> float:
+        return (len(self.points) - 1 - self.progress) * self.step_m
+
+
+@dataclass(frozen=True, slots=True)
+class JoinTarget:
+    """The team's joining in gather (``gather_join = "seat"``): every member's seat (polar
+    angles about the target, rad, counter-clockwise from east) and path, in the order of the
+    team the plan was made for, this vehicle's place in it, the members seen at their seats
+    (they no longer hold the team's time), and the time the slowest reaches its seat (vehicle
+    time, s)."""
+
+    index: int
+    seats_rad: tuple[float, ...]
+    paths: tuple[JoinPath, ...]
+    t_join_s: float
+    seated: frozenset[int] = frozenset()
+
+    @property
+    def seat_angle_rad(self) -> float:
+        return self.seats_rad[self.index]
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,6 +302,10 @@ class MissionAgentState:
     separation_threat: int | None = None
     separation_band: bool = False
     separation_acted_t_s: float = -math.inf
+    #: the seat this vehicle flies to in gather (``gather_join = "seat"``), and whether this
+    #: gather's joining leg is over (joined, or dropped)
+    join: JoinTarget | None = None
+    join_done: bool = False
 
 
 def initial_agent_state(
@@ -824,6 +893,11 @@ def _control(
     )
     g, command, events = agent_step(state.guidance, inputs, agent)
     state = replace(state, guidance=g)
+    if params.gather_join == "seat":
+        state, command, joining = _join_leg(
+            state, t_s, own, target, team, motion, index, agent, command, params, known_wind
+        )
+        events = (*events, *joining)
     if agent.guidance.orbit_plan == "ellipse":
         state, planned = _orbit_planned(state, t_s, target, agent, wind)
         events = (*events, *planned)
@@ -898,6 +972,216 @@ def _orbit_planned(
 
 
 _ORBIT_REPORT_S = 20.0
+
+
+#: the joining paths turn on this many times the tightest turn at the top speed (the rest of
+#: the course rate is the tracking's, against the course loop's lag)
+_JOIN_TURN_MARGIN = 1.1
+#: within this of the circle (m), flying along it (within ``_JOIN_ALONG``), a vehicle has
+#: joined it: the field and phase keeping take it from there
+_JOIN_CIRCLE_M = 20.0
+_JOIN_ALONG = math.radians(30.0)
+#: points of a joining path this far apart (m)
+_JOIN_STEP_M = 2.0
+#: further than this from its path (m), a vehicle plans its path to the seat again
+_JOIN_REPLAN_M = 40.0
+#: the point steered for is this far ahead along the path (s at the speed flown, at least 20 m)
+_JOIN_LOOKAHEAD_S = 1.5
+
+
+def _join_path(
+    start: tuple[float, float, float],
+    goal: tuple[float, float, float],
+    turn_radius_m: float,
+    airspeed_m_s: float,
+    wind: tuple[float, float],
+) -> JoinPath:
+    path = dubins(start, goal, turn_radius_m)
+    time_s = flight_time(start, path, turn_radius_m, airspeed_m_s, wind)
+    speed = path.length_m / time_s if math.isfinite(time_s) and time_s > 0.0 else airspeed_m_s
+    points = sample_path(start, path, turn_radius_m, _JOIN_STEP_M)
+    return JoinPath(points, path.length_m, speed)
+
+
+def _join_leg(
+    state: MissionAgentState,
+    t_s: float,
+    own: OwnTelemetry,
+    target: TargetInfo,
+    team: list[tuple[float, float]],
+    motion: list[tuple[float, float]],
+    index: int,
+    agent: AgentParams,
+    command: Command,
+    params: MissionAgentParams,
+    known_wind: tuple[float, float] | None = None,
+) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
+    """Gather with a seat each (``gather_join = "seat"``), in place of the field's ``command``
+    until the vehicle is on its way round the circle.
+
+    At the first gather tick with every active teammate's status fresh (a team of 2 to
+    ``dubins.MAX_JOIN_TEAM``), the agent plans the team's joining (``dubins.join_plan``: seats
+    2 pi / n apart, each vehicle's shortest path at the top speed, the slowest flight as quick
+    as can be, timed in the wind the agent knows) and every member's path from the poses it
+    knows; every agent plans from the same statuses, so the plans agree. The paths turn on
+    ``_JOIN_TURN_MARGIN`` times the tightest turn at the top speed over the ground (the
+    airspeed plus the wind), which leaves course rate to follow them with. Each tick:
+
+    - the team's time is taken again: when the slowest member not yet at its seat, going on
+      along its path at the plan's speed from the point of it nearest its status, gets there
+      (a member held up by the wind or a turn holds all back);
+    - the vehicle steers for the point ``_JOIN_LOOKAHEAD_S`` ahead of the nearest one on its
+      path, with the path's turn fed forward, at the speed that brings it to its seat at the
+      team's time (within the envelope); further than ``_JOIN_REPLAN_M`` off its path it plans
+      its path again.
+
+    Within ``join_handover_m`` of its seat or of its path's end it has joined (event
+    ``joined``) and the field and phase keeping fly on; the leg goes on into adjust (which the
+    ground station starts once every vehicle is near the circle, some still on the last turn
+    of their paths). A vehicle that joins the team or leaves it makes every agent plan again
+    in gather (``join_dropped``, then ``join_planned``; in adjust the leg is dropped); the leg
+    ends with the stage (a target seen moving takes the team to track: its estimated velocity alone
+    is not trusted here, as it is noisy while the filters start, early in gather); a team that
+    cannot be planned, or a vehicle whose phase actuator is not its
+    speed (PX4 fixed-wing holds its own airspeed: the arrivals could not be timed), flies the
+    field."""
+    if state.stage not in (Stage.GATHER, Stage.ADJUST):
+        if state.join is not None or state.join_done:
+            state = replace(state, join=None, join_done=False)
+        return state, command, ()
+    if state.join_done or (state.join is None and state.stage != Stage.GATHER):
+        return state, command, ()
+    env = agent.envelope
+    sign = agent.guidance.orbit_sign
+    rd = agent.guidance.radius_m
+    wind = (0.0, 0.0) if known_wind is None else known_wind
+    # the tightest ground turn downwind: at the top airspeed plus the wind the agent knows
+    turn_radius = (
+        _JOIN_TURN_MARGIN * (env.max_speed_m_s + math.hypot(*wind)) / env.max_course_rate_rad_s
+    )
+    centre = (target.east_m, target.north_m)
+    join = state.join
+    events: tuple[AgentEvent, ...] = ()
+    if join is not None and (len(team) != len(join.seats_rad) or index != join.index):
+        # a vehicle joined the team or left it (every agent hears it alike): plan again, in
+        # gather; in adjust the field spaces what there is
+        state = replace(state, join=None, join_done=state.stage != Stage.GATHER)
+        events = (AgentEvent(t_s, "join_dropped", "the team changed"),)
+        if state.join_done:
+            return state, command, events
+        join = None
+    starts = [
+        (east, north, 0.5 * math.pi - course)
+        for (east, north), (course, _) in zip(team, motion, strict=True)
+    ]
+    if join is None:
+        n = len(team)
+        if params.vehicle not in state.active or n != len(state.active) or n < 2:
+            # a teammate not heard yet, or none in the team yet: try again next tick
+            return state, command, events
+        if n > MAX_JOIN_TEAM or agent.phase.actuator != "speed":
+            # too large a team to plan, or an autopilot that holds its own airspeed (the
+            # arrivals are timed by the speed): the field
+            return replace(state, join_done=True), command, events
+        # seats in the order the vehicles sit round the target (their polar angles), as the
+        # paper's seat law has it: with the assignment free, every agent would pick the
+        # slowest's seat alike but could break the ties of the others' differently (over
+        # MAVLink two agents once took the same seat)
+        order = sorted(
+            range(n), key=lambda v: (math.atan2(team[v][1] - centre[1], team[v][0] - centre[0]), v)
+        )
+        try:
+            plan = join_plan(
+                starts, centre, rd, sign, env.max_speed_m_s, turn_radius, wind, order=order
+            )
+        except ValueError as exc:  # a wind no seat can be reached against: the field
+            state = replace(state, join_done=True)
+            return state, command, (AgentEvent(t_s, "join_dropped", str(exc)),)
+        paths = tuple(
+            _join_path(
+                start,
+                seat_pose(centre, rd, seat, sign),
+                turn_radius,
+                env.max_speed_m_s,
+                wind,
+            )
+            for start, seat in zip(starts, plan.seat_angles_rad, strict=True)
+        )
+        join = JoinTarget(index, plan.seat_angles_rad, paths, t_s + plan.time_s)
+        detail = (
+            f"seat at {math.degrees(join.seat_angle_rad):.0f} deg about the target, joining in "
+            f"{plan.time_s:.1f} s (the team's slowest flight), {paths[index].length_m:.0f} m "
+            "to fly"
+        )
+        events = (*events, AgentEvent(t_s, "join_planned", detail))
+    # every member's progress, and the team's time
+    paths_now = list(join.paths)
+    seated = set(join.seated)
+    slowest = 0.0
+    own_off = 0.0
+    for j, start in enumerate(starts):
+        path, off = paths_now[j].nearest(start[0], start[1])
+        if j == index and off > _JOIN_REPLAN_M:
+            goal = seat_pose(centre, rd, join.seats_rad[j], sign)
+            path = _join_path(start, goal, turn_radius, env.max_speed_m_s, wind)
+            detail = f"{off:.0f} m off its path"
+            events = (*events, AgentEvent(t_s, "join_replanned", detail))
+            off = 0.0
+        paths_now[j] = path
+        if j == index:
+            own_off = off
+        if j in seated:
+            continue
+        if path.remaining_m() <= 2.0 * params.join_handover_m:
+            seated.add(j)
+            continue
+        slowest = max(slowest, path.remaining_m() / path.speed_m_s)
+    join = replace(join, paths=tuple(paths_now), seated=frozenset(seated), t_join_s=t_s + slowest)
+    own_path = paths_now[index]
+    goal = seat_pose(centre, rd, join.seat_angle_rad, sign)
+    to_seat = math.hypot(own.east_m - goal[0], own.north_m - goal[1])
+    x, y = own.east_m - centre[0], own.north_m - centre[1]
+    along = wrap_pi(0.5 * math.pi - own.course_rad - math.atan2(y, x) - sign * 0.5 * math.pi)
+    on_circle = abs(math.hypot(x, y) - rd) <= _JOIN_CIRCLE_M and abs(along) < _JOIN_ALONG
+    if (
+        on_circle
+        or to_seat <= params.join_handover_m
+        or own_path.remaining_m() <= params.join_handover_m
+    ):
+        state = replace(state, join=None, join_done=True)
+        detail = (
+            f"{to_seat:.0f} m from its seat, {own_off:.0f} m off its path, "
+            f"{math.hypot(x, y) - rd:+.1f} m off the circle"
+        )
+        return state, command, (*events, AgentEvent(t_s, "joined", detail))
+    pts, near, step = own_path.points, own_path.progress, own_path.step_m
+    last = len(pts) - 1
+    speed_now = max(own.speed_m_s, env.min_speed_m_s)
+    ahead = max(_JOIN_LOOKAHEAD_S * speed_now, 20.0)
+    k = near + round(ahead / step) if step > 0.0 else last
+    if k <= last:
+        px, py = pts[k][0], pts[k][1]
+    else:  # past the end: on along the seat's direction
+        beyond = (k - last) * step
+        px, py = goal[0] + beyond * math.cos(goal[2]), goal[1] + beyond * math.sin(goal[2])
+    wanted = math.atan2(px - own.east_m, py - own.north_m)
+    rate = -pts[min(near + 1, last)][3] * speed_now
+    left = join.t_join_s - t_s
+    remaining = own_path.remaining_m()
+    # flat out for the slowest (its own time is the team's), and as much slower for the others
+    # as their time to spare asks (in the plan's wind: its mean ground speed for the top one)
+    own_time = remaining / own_path.speed_m_s
+    speed_wanted = env.max_speed_m_s * own_time / left if left > 0.0 else env.max_speed_m_s
+    speed = min(max(speed_wanted, env.min_speed_m_s), env.max_speed_m_s)
+    course = course_command(own.course_rad, wanted, rate, agent.course_loop)
+    command = replace(
+        command,
+        course_rad=course,
+        speed_m_s=speed,
+        field_course_rad=wanted,
+        course_rate_ff_rad_s=rate,
+    )
+    return replace(state, join=join), command, events
 
 
 def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentParams) -> AgentParams:
