@@ -120,8 +120,8 @@ def test_the_joining_plan_puts_each_vehicle_on_its_own_seat_and_the_slowest_firs
             (x + rng.uniform(-2.0, 2.0), y + rng.uniform(-2.0, 2.0), h + rng.uniform(-0.03, 0.03))
             for x, y, h in team
         ]
-        seats = join_plan(view, (0.0, 0.0), 90.0, 1, 18.0, 99.0).seat_angles_rad
-        for a, b in zip(seats, agreed, strict=True):
+        found = join_plan(view, (0.0, 0.0), 90.0, 1, 18.0, 99.0).seat_angles_rad
+        for a, b in zip(found, agreed, strict=True):
             assert abs((math.degrees(a - b) + 180.0) % 360.0 - 180.0) <= 3.0
     # the same team in a head wind takes longer
     windy = join_plan(starts, (0.0, 0.0), 90.0, 1, 18.0, R, (-3.0, 0.0))
