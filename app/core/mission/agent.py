@@ -978,8 +978,11 @@ _ORBIT_REPORT_S = 20.0
 #: the course rate is the tracking's, against the course loop's lag)
 _JOIN_TURN_MARGIN = 1.1
 #: within this of the circle (m), flying along it (within ``_JOIN_ALONG``), a vehicle has
-#: joined it: the field and phase keeping take it from there
-_JOIN_CIRCLE_M = 20.0
+#: joined it: the field and phase keeping take it from there (20 m handed over on the last
+#: turn's approach, 140 m before the seat, and the short mission of configs/test-short.toml
+#: then formed only after the target had left; without it the default mission's vehicles
+#: ended their paths 8 m off the circle and formed 15 s later)
+_JOIN_CIRCLE_M = 5.0
 _JOIN_ALONG = math.radians(30.0)
 #: points of a joining path this far apart (m)
 _JOIN_STEP_M = 2.0
