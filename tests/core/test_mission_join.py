@@ -24,25 +24,28 @@ def _config(join="seat", vehicles=3, **update):
     return config.model_copy(update={"guidance": guidance, "vehicles": vehicles, **update})
 
 
-def _team_tick(config, places, target_v=(0.0, 0.0), stage="gather"):
+def _team_tick(config, places, target_v=(0.0, 0.0), stage="gather", heard=None):
     """One control tick of each agent of ``config``'s team in ``stage``, the vehicles at
-    ``places`` flying east at 14 m/s, the fused estimate a target at the origin moving at
-    ``target_v``: per agent (state after, command, events)."""
+    ``places`` ((east, north) flying east at 14 m/s, or (east, north, heading counter-clockwise
+    from east)), the fused estimate a target at the origin moving at ``target_v``; with
+    ``heard(i, pose)`` what agent i hears of a teammate's pose: per agent (state after,
+    command, events)."""
     plist = build_plan(config).agents
     state_vector = np.array([0.0, target_v[0], 0.0, target_v[1], 0.0, 0.0])  # e, ve, n, vn
     estimate = GlobalEstimate(0.0, state_vector, np.eye(6), (("0", 1.0),))
+    poses = [(*place, 0.0) if len(place) == 2 else tuple(place) for place in places]
     out = []
     for i, p in enumerate(plist):
         state = logic.hear_mission(
             logic.initial_agent_state(p), stage, tuple(q.vehicle for q in plist)
         )
         state = logic.hear_fused(state, estimate, p)
-        for j, (e, n) in enumerate(places):
-            state = logic.hear_teammate(
-                state, plist[j].vehicle, logic.TeammateFix(0.0, e, n, 0.5 * math.pi, 14.0)
-            )
-        e, n = places[i]
-        own = OwnTelemetry(e, n, 0.5 * math.pi, 14.0, 14.0, (0.0, 0.0))
+        for j, pose in enumerate(poses):
+            e, n, h = pose if heard is None or j == i else heard(i, pose)
+            fix = logic.TeammateFix(0.0, e, n, 0.5 * math.pi - h, 14.0)
+            state = logic.hear_teammate(state, plist[j].vehicle, fix)
+        e, n, h = poses[i]
+        own = OwnTelemetry(e, n, 0.5 * math.pi - h, 14.0, 14.0, (0.0, 0.0))
         out.append(logic.control(state, 0.0, own, p))
     return out
 
@@ -168,29 +171,23 @@ def test_agents_with_slightly_different_views_still_take_distinct_seats():
     # and itself exactly; every vehicle still gets its own seat, about 120 degrees from the
     # others' (with the assignment left free, the two not setting the team's time were ties
     # that views like these broke differently, and two agents took the same seat)
-    config = _config()
-    plist = build_plan(config).agents
-    estimate = GlobalEstimate(0.0, np.zeros(6), np.eye(6), (("0", 1.0),))
     # the team at the tracking command of a MAVLink run (bench_load, command at 18 s) where two
     # agents had taken the same seat: east, north, heading counter-clockwise from east
     poses = [(-899.3, 165.65, 2.84), (-978.65, 192.98, 3.26), (-1062.18, 184.39, 3.67)]
     rng = np.random.default_rng(1)
+
+    def heard(_i, pose):
+        e, n, h = pose
+        return (
+            e + rng.uniform(-2.0, 2.0),
+            n + rng.uniform(-2.0, 2.0),
+            h + rng.uniform(-0.035, 0.035),
+        )
+
     for _ in range(10):
+        ticks = _team_tick(_config(), poses, heard=heard)
         seats = []
-        for i, p in enumerate(plist):
-            state = logic.hear_mission(
-                logic.initial_agent_state(p), "gather", tuple(q.vehicle for q in plist)
-            )
-            state = logic.hear_fused(state, estimate, p)
-            for j, (e, n, h) in enumerate(poses):
-                if j != i:
-                    e, n = e + rng.uniform(-2.0, 2.0), n + rng.uniform(-2.0, 2.0)
-                    h += rng.uniform(-0.035, 0.035)
-                fix = logic.TeammateFix(0.0, e, n, 0.5 * math.pi - h, 14.0)
-                state = logic.hear_teammate(state, plist[j].vehicle, fix)
-            e, n, h = poses[i]
-            own = OwnTelemetry(e, n, 0.5 * math.pi - h, 14.0, 14.0, (0.0, 0.0))
-            state, _, _ = logic.control(state, 0.0, own, p)
+        for state, _, _ in ticks:
             assert state.join is not None
             seats.append(math.degrees(state.join.seat_angle_rad) % 360.0)
         gaps = [*np.diff(sorted(seats)).tolist(), 360.0 - max(seats) + min(seats)]
