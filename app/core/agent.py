@@ -285,8 +285,9 @@ class OwnTelemetry:
     north), ground speed m/s; the autopilot's airspeed m/s where it reports one (the wind
     estimate's input, ``guidance.wind``) and its own wind estimate (east, north m/s, where the
     air moves to) where it sends one (PX4 WIND_COV, ArduPilot WIND), which the mission agent
-    then flies instead of its own fit. ``up_m``: its height about the origin where known (the
-    separation guard's input, ``mission.separation``)."""
+    then flies instead of its own fit. ``up_m``: its height about the origin where known, with
+    ``climb_m_s`` its climb rate and ``level_up_m`` the height about the origin it is sent to
+    (the separation guard's inputs, ``mission.separation``)."""
 
     east_m: float
     north_m: float
@@ -295,6 +296,8 @@ class OwnTelemetry:
     airspeed_m_s: float | None = None
     wind_m_s: tuple[float, float] | None = None
     up_m: float | None = None
+    climb_m_s: float | None = None
+    level_up_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -344,6 +344,8 @@ class VehicleAgent:
             frame.airspeed_m_s,
             frame.wind_m_s,
             frame.up_m,
+            frame.climb_rate_m_s,
+            self._level_up(frame),
         )
         self._frame_wait(frame)
         try:
@@ -382,6 +384,14 @@ class VehicleAgent:
         self.state, out = self._step(logic.Telemetry(t, own), self.params)
         if out.status is not None:
             await self._publish_status(out.status)
+
+    def _level_up(self, frame: VehicleTelemetry) -> float | None:
+        """The height about the origin the vehicle is sent to (its place in the stack), where
+        the mission holds its altitude."""
+        altitude = self._runtime.altitude_m
+        if altitude is None:
+            return None
+        return frame.up_m - frame.relative_altitude_m + altitude
 
     def _altitude(self, frame: VehicleTelemetry, command: Command) -> float | None:
         """The altitude to hold (above home): the vehicle's place in the stack, held to the
@@ -520,6 +530,8 @@ class VehicleAgent:
             north_m=status.north_m,
             alt_m=latest.relative_altitude_m if latest is not None else 0.0,
             up_m=latest.up_m if latest is not None else None,
+            climb_m_s=latest.climb_rate_m_s if latest is not None else None,
+            level_up_m=self._level_up(latest) if latest is not None else None,
             course_rad=status.course_rad,
             speed_m_s=status.speed_m_s,
             phase_rad=status.phase_rad,
@@ -658,6 +670,8 @@ class VehicleAgent:
                     message.course_rad,
                     message.speed_m_s,
                     message.up_m,
+                    message.climb_m_s,
+                    message.level_up_m,
                 )
                 teammate = logic.HeardTeammate(message.vehicle, fix)
                 self.state, out = self._step(teammate, self.params)

@@ -168,6 +168,43 @@ async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude(
     assert altitudes == [base + i * stack_m for i in range(plan.count)]
 
 
+async def test_the_status_says_the_height_the_climb_and_the_level_it_is_sent_to() -> None:
+    """What the teammates' separation guards predict a climb on: the vehicle's height about the
+    origin, its climb rate, and its place in the stack about the origin (home 10 m above it)."""
+    plan = build_plan(load_config("hil", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    statuses: list[bus.VehicleStatus] = []
+    async with (
+        InProcessBus(broker, client_id="agent-2") as agent_bus,
+        InProcessBus(broker, client_id="ground") as ground,
+        ground.subscribe(topics.ALL_STATUS) as heard,
+        asyncio.TaskGroup() as tg,
+    ):
+
+        async def listen() -> None:
+            async for _topic, message in heard:
+                if isinstance(message, bus.VehicleStatus):
+                    statuses.append(message)
+
+        listening = tg.create_task(listen())
+        agent = vehicle_agent(plan, 1, link, agent_bus, Events(), builtin=True)
+        running = tg.create_task(agent.run())
+        for k in range(30):
+            height = 50.0 + 0.3 * k
+            link.put(frame(0.1 * (k + 1), -1000.0, 150.0, relative_altitude_m=height,
+                           up_m=10.0 + height, climb_rate_m_s=3.0))  # fmt: skip
+            await asyncio.sleep(0.002)
+        await until(lambda: len(statuses) >= 5)
+        running.cancel()
+        listening.cancel()
+    last = statuses[-1]
+    assert last.up_m is not None
+    assert last.up_m == pytest.approx(10.0 + last.alt_m)
+    assert last.climb_m_s == pytest.approx(3.0)
+    assert last.level_up_m == pytest.approx(10.0 + bring_up(plan, 1).altitude_m)
+
+
 class ClimbingLink(QueueLink):
     """A vehicle that takes off from a runway: ``take_off`` returns once it is rolling, and
     frames then come from ``profile`` (height m, airspeed m/s), 0.5 s apart."""

@@ -81,7 +81,8 @@ GatherJoin = Literal["point", "seat"]
 @dataclass(frozen=True, slots=True)
 class TeammateFix:
     """Where a teammate was at ``t_s`` (m, rad clockwise from north, m/s; ``up_m`` its height
-    about the origin, None where its status has none)."""
+    about the origin, ``climb_m_s`` its climb rate and ``level_up_m`` the height it climbs
+    or descends to, None where its status has none)."""
 
     t_s: float
     east_m: float
@@ -89,11 +90,25 @@ class TeammateFix:
     course_rad: float
     speed_m_s: float
     up_m: float | None = None
+    climb_m_s: float | None = None
+    level_up_m: float | None = None
 
     def at(self, t_s: float, max_extrapolation_s: float) -> tuple[float, float]:
         """Position dead-reckoned to ``t_s`` along the last course (at most the given span)."""
         dt = min(max(t_s - self.t_s, 0.0), max_extrapolation_s)
         return dead_reckon(self.east_m, self.north_m, self.course_rad, self.speed_m_s, dt)
+
+    def up_at(self, t_s: float, max_extrapolation_s: float) -> float | None:
+        """Height dead-reckoned to ``t_s`` at the last climb rate, not past its level (at most
+        the given span; without a climb rate, the height of the fix)."""
+        if self.up_m is None or self.climb_m_s is None:
+            return self.up_m
+        dt = min(max(t_s - self.t_s, 0.0), max_extrapolation_s)
+        up = self.up_m + self.climb_m_s * dt
+        if self.level_up_m is not None:
+            low, high = sorted((self.up_m, self.level_up_m))
+            up = min(max(up, low), high)
+        return up
 
 
 @dataclass(frozen=True, slots=True)
@@ -560,7 +575,18 @@ def _separate(
         if vehicle == params.vehicle or abs(t_s - fix.t_s) > separation.max_age_s:
             continue
         east, north = fix.at(t_s, separation.max_age_s)
-        traffic.append(Traffic(vehicle, east, north, fix.up_m, fix.course_rad, fix.speed_m_s))
+        traffic.append(
+            Traffic(
+                vehicle,
+                east,
+                north,
+                fix.up_at(t_s, separation.max_age_s),
+                fix.course_rad,
+                fix.speed_m_s,
+                fix.climb_m_s,
+                fix.level_up_m,
+            )
+        )
     assert own.up_m is not None
     r = resolve(
         own.east_m,
@@ -573,6 +599,8 @@ def _separate(
         params.agent.envelope.max_course_rate_rad_s,
         separation,
         state.separation_near,
+        own.climb_m_s,
+        own.level_up_m,
     )
     events: list[AgentEvent] = []
     band = r.min_up_m is not None or r.max_up_m is not None

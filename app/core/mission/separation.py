@@ -13,12 +13,26 @@ either is enough for a 3-D distance of at least that. Each agent, on every tick,
   and pass left to left, as on a runway's circuit); if no course keeps it, the course that
   passes farthest.
 - **Vertically**, a teammate horizontally near (the same prediction, on the wanted course) is
-  never climbed or descended into: the lower vehicle of the pair climbs at most to
+  never climbed or descended into: the lower vehicle of the pair (within ``_TIE_M`` of one
+  height, the one sent to the lower level, where both levels are known) climbs at most to
   ``min_distance_m + vertical_margin_m`` below the upper, the upper descends at most to as far
   above the lower, and neither moves toward the other if it is already closer. So a vehicle
   climbing to its place in the altitude stack waits below a teammate it would climb through
   until they are clear horizontally, and stacked vehicles (at least the minimum apart) keep
   their horizontal freedom.
+- **A climb that parts the pair** (both heights, climb rates and levels known: the
+  teammate's ``Traffic.climb_m_s`` and ``level_up_m``, the agent's own as arguments): where
+  the upper vehicle of a pair less than ``min_distance_m`` apart climbs to a level above the
+  lower one's, the prediction counts on ``climb_credit`` of that climb, up to its level, less
+  whatever climb the lower one still has toward it (the band holds it, but an autopilot takes
+  a moment to level off, and one that does not honour the height it is sent would not), and a
+  step of the look-ahead is safe once the pair is ``min_distance_m`` apart vertically or
+  ``guard`` apart in three dimensions. So a team that took off together and climbs to its
+  altitude stack need not turn apart horizontally where the climb alone parts it in time (a
+  turn costs a vehicle on its joining path: pushed 40 m off it, one planned a path 81 m
+  longer, and its team formed 6 s late). A pair less than ``_TIE_M`` apart in height, or whose
+  upper one does not climb to a level above the lower one's, is predicted at its heights of
+  now, as before.
 
 The teammates' positions are their agents' statuses (10 Hz on the bus); a teammate without an
 altitude is taken to be at the agent's own. The agent's own altitude is needed: without it
@@ -55,6 +69,7 @@ class SeparationParams:
     course_step_rad: float = math.radians(15.0)
     max_offset_rad: float = math.radians(150.0)
     max_age_s: float = 3.0
+    climb_credit: float = 0.8
 
     def __post_init__(self) -> None:
         for name in ("min_distance_m", "look_ahead_s", "step_s", "course_step_rad", "max_age_s"):
@@ -65,6 +80,10 @@ class SeparationParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"separation {name} must be finite and >= 0, got {value!r}")
+        if not (math.isfinite(self.climb_credit) and 0.0 <= self.climb_credit <= 1.0):
+            raise ValueError(
+                f"separation climb_credit must be in [0, 1], got {self.climb_credit!r}"
+            )
         if not (math.isfinite(self.max_offset_rad) and 0.0 <= self.max_offset_rad <= math.pi):
             raise ValueError(
                 f"separation max_offset_rad must be in [0, pi], got {self.max_offset_rad!r}"
@@ -78,7 +97,9 @@ class SeparationParams:
 @dataclass(frozen=True, slots=True)
 class Traffic:
     """A teammate where it is now (dead-reckoned to the tick): m east/north of the origin and
-    up about it (None: not known), course rad clockwise from north, ground speed m/s."""
+    up about it (None: not known), course rad clockwise from north, ground speed m/s; its
+    climb rate (m/s, up) and the height about the origin it climbs or descends to (its
+    altitude setpoint), where its status says them."""
 
     vehicle: int
     east_m: float
@@ -86,6 +107,8 @@ class Traffic:
     up_m: float | None
     course_rad: float
     speed_m_s: float
+    climb_m_s: float | None = None
+    level_up_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,16 +165,70 @@ def _own_paths(
     return east, north, t
 
 
-def _closest(
-    start: tuple[float, float], east: FloatArray, north: FloatArray, t: FloatArray, other: Traffic
-) -> FloatArray:
-    """Each own path's least horizontal distance to ``other`` flying straight (k,), from
-    ``start``, where the paths begin."""
+#: a pair closer than this in height (m) is told apart by the levels they go to (their views of
+#: each other, a status apart, may not agree which is higher)
+_TIE_M = 0.5
+
+
+def _horizontal(east: FloatArray, north: FloatArray, t: FloatArray, other: Traffic) -> FloatArray:
+    """Each own path's horizontal distance to ``other`` flying straight, at each step (k, s)."""
     oe = other.east_m + other.speed_m_s * math.sin(other.course_rad) * t
     on = other.north_m + other.speed_m_s * math.cos(other.course_rad) * t
-    d: FloatArray = np.hypot(east - oe[None, :], north - on[None, :]).min(axis=1)
-    now = math.hypot(start[0] - other.east_m, start[1] - other.north_m)
-    return np.minimum(d, now)
+    out: FloatArray = np.hypot(east - oe[None, :], north - on[None, :])
+    return out
+
+
+def _above(up_m: float, level_up_m: float | None, other: Traffic) -> bool:
+    """Whether ``other`` is the upper one of the pair: the higher, or within ``_TIE_M`` the one
+    sent higher (both agents tell a pair climbing side by side apart alike)."""
+    assert other.up_m is not None
+    dz = other.up_m - up_m
+    other_level = other.level_up_m
+    if (
+        abs(dz) < _TIE_M
+        and level_up_m is not None
+        and other_level is not None
+        and other_level != level_up_m
+    ):
+        return other_level > level_up_m
+    return dz > 0.0
+
+
+def _parting(
+    up_m: float,
+    climb_m_s: float | None,
+    level_up_m: float | None,
+    other: Traffic,
+    t: FloatArray,
+    params: SeparationParams,
+) -> FloatArray | None:
+    """The pair's height apart at each step (s,): the upper one climbing on to its level at
+    ``climb_credit`` of its climb rate, the lower one at its whole climb rate toward the upper
+    (held by the band, it soon has none) up to its own level, and no apart from a predicted
+    crossing on; None where no climb parts them: heights, climb rates or levels unknown,
+    heights within ``_TIE_M``, the upper one not climbing to a level above the lower's."""
+    if other.up_m is None or level_up_m is None or other.level_up_m is None:
+        return None
+    if climb_m_s is None or other.climb_m_s is None:
+        return None
+    dz = other.up_m - up_m
+    if abs(dz) < _TIE_M:
+        return None
+    own = (up_m, climb_m_s, level_up_m)
+    them = (other.up_m, other.climb_m_s, other.level_up_m)
+    (upper, up_climb, up_level), (lower, low_climb, low_level) = (
+        (them, own) if dz > 0.0 else (own, them)
+    )
+    values = (up_climb, up_level, low_climb, low_level)
+    if not all(math.isfinite(v) for v in values):
+        return None
+    if not (up_climb > 0.0 and up_level > upper and up_level > low_level):
+        return None
+    rise = np.minimum(params.climb_credit * up_climb * t, up_level - upper)
+    chase = np.clip(low_climb * t, 0.0, max(low_level - lower, 0.0))
+    apart = abs(dz) + rise - chase
+    out: FloatArray = np.where(np.minimum.accumulate(apart) <= 0.0, 0.0, apart)
+    return out
 
 
 def resolve(
@@ -165,10 +242,14 @@ def resolve(
     max_rate_rad_s: float,
     params: SeparationParams,
     acted_on: frozenset[int] = frozenset(),
+    climb_m_s: float | None = None,
+    level_up_m: float | None = None,
 ) -> Resolution:
     """The course and the height band that keep the agent separated from ``traffic`` (see the
     module); the wanted course and no band when nothing is near. ``acted_on``: the teammates
-    the tick before acted on (``Resolution.near``), held to the guard plus the hysteresis."""
+    the tick before acted on (``Resolution.near``), held to the guard plus the hysteresis;
+    ``climb_m_s`` and ``level_up_m``: the agent's own climb rate and the height it climbs to
+    (a climb that parts a pair)."""
     if up_m is None or not traffic:
         return Resolution(wanted_course_rad)
     guard = params.guard_m
@@ -201,16 +282,19 @@ def resolve(
     worst_on_wanted = math.inf
     acted: set[int] = set()
     for other in near:
-        d = _closest((east_m, north_m), east, north, t, other)
+        apart = _horizontal(east, north, t, other)
+        now = math.hypot(east_m - other.east_m, north_m - other.north_m)
+        d = np.minimum(apart.min(axis=1), now)
         dz = 0.0 if other.up_m is None else other.up_m - up_m
         wanted = float(d[0])
         closest = min(closest, math.hypot(wanted, dz))
-        if wanted >= guard + (params.hysteresis_m if other.vehicle in acted_on else 0.0):
+        hysteresis = params.hysteresis_m if other.vehicle in acted_on else 0.0
+        if wanted >= guard + hysteresis:
             continue
         acted.add(other.vehicle)
         # horizontally near on the wanted course: never climb or descend into it
         if other.up_m is not None:
-            if dz > 0.0:  # it is above: climb at most to ``keep`` below it
+            if _above(up_m, level_up_m, other):  # climb at most to ``keep`` below it
                 cap = max(up_m, other.up_m - keep)
                 max_up = cap if max_up is None else min(max_up, cap)
             else:
@@ -218,6 +302,16 @@ def resolve(
                 min_up = floor if min_up is None else max(min_up, floor)
         if abs(dz) >= params.min_distance_m:
             continue  # vertically separated, and kept so by the band
+        parting = _parting(up_m, climb_m_s, level_up_m, other, t, params)
+        if parting is not None:
+            # in three dimensions, each step safe once the climb has parted the pair
+            spread = np.where(
+                parting[None, :] >= params.min_distance_m, math.inf, np.hypot(apart, parting)
+            )
+            d = np.minimum(spread.min(axis=1), math.hypot(now, dz))
+            wanted = float(d[0])
+            if wanted >= guard + hysteresis:
+                continue  # the climb parts them in time: the band alone
         horizontal = np.minimum(horizontal, d)
         if wanted < worst_on_wanted:
             worst_on_wanted, threat = wanted, other.vehicle

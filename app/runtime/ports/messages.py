@@ -216,6 +216,8 @@ class VehicleStatus(Message):
     north_m: Finite
     alt_m: Finite  # above the vehicle's home
     up_m: Finite | None = None  # height about the mission origin (separation, 3-D)
+    climb_m_s: Finite | None = None  # its climb rate (m/s, up)
+    level_up_m: Finite | None = None  # the height about the origin it is sent to (its stack)
     course_rad: Finite  # MAVLink convention: clockwise from north
     speed_m_s: NonNegative
     phase_rad: Finite  # the vehicle's phase angle about the target estimate
