@@ -233,7 +233,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         if gout.fused is not None:
             inputs.append(logic.HeardFused(_bus_global(gout.fused)))
         if gout.mission is not None:
-            inputs.append(logic.HeardMission(gout.mission.stage, gout.mission.active))
+            inputs.append(logic.HeardMission(gout.mission.stage, gout.mission.active, t))
         for i in range(n):
             fixes = [logic.HeardTeammate(j, _fix(s)) for j, s in statuses if j != i]
             for event in (*inputs, *fixes):

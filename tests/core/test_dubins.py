@@ -130,3 +130,32 @@ def test_the_joining_plan_puts_each_vehicle_on_its_own_seat_and_the_slowest_firs
         join_plan(starts * 2, (0.0, 0.0), 90.0, 1, 18.0, R)  # six: too many to search
     with pytest.raises(ValueError):
         join_plan(starts, (0.0, 0.0), 90.0, 1, 2.0, R, (-3.0, 0.0))  # the wind wins
+
+
+def test_with_the_least_speed_no_vehicle_is_planned_to_arrive_before_the_team():
+    """Three vehicles side by side 60 m apart flying west 118 m north of the circle's centre
+    (the ArduPlane personality's team at the tracking command): two placings are within 0.1 s
+    for the slowest flight, and in the one taken on that alone a vehicle with 285 m to fly
+    would reach its seat 6 s before the team even at the least speed. Counting that, the
+    placing taken has every vehicle able to take the team's time."""
+    radius, speed, least, turn = 90.0, 18.0, 10.0, 1.1 * 18.0 / 0.2
+    centre = (0.6, 0.1)
+    starts = [(-122.7 + 60.0 * j, 117.7, math.radians(181.0)) for j in range(3)]
+    order = sorted(range(3), key=lambda v: math.atan2(starts[v][1], starts[v][0]))
+
+    def longest(plan):
+        return [
+            dubins(s, seat_pose(centre, radius, a, 1), turn).length_m / least
+            for s, a in zip(starts, plan.seat_angles_rad, strict=True)
+        ]
+
+    blind = join_plan(starts, centre, radius, 1, speed, turn, order=order)
+    seeing = join_plan(starts, centre, radius, 1, speed, turn, order=order, min_speed_m_s=least)
+    assert min(longest(blind)) < blind.time_s - 5.0
+    assert min(longest(seeing)) >= seeing.time_s
+    assert seeing.time_s < blind.time_s + 0.5  # for about the same slowest flight
+
+
+def test_a_least_speed_above_the_top_speed_is_refused():
+    with pytest.raises(ValueError, match="min_speed_m_s"):
+        join_plan([(0.0, 0.0, 0.0)], (500.0, 0.0), 90.0, 1, 14.0, 77.0, min_speed_m_s=15.0)

@@ -2,6 +2,7 @@
 agent, the joining leg and when it gives way to the field."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core.agent import OwnTelemetry
 from app.core.estimation.messages import GlobalEstimate
+from app.core.guidance.dubins import join_plan
 from app.core.mission import agent as logic
 
 #: three vehicles 1 km west of the target, flying east, 150 m apart
@@ -192,3 +194,65 @@ def test_agents_with_slightly_different_views_still_take_distinct_seats():
             seats.append(math.degrees(state.join.seat_angle_rad) % 360.0)
         gaps = [*np.diff(sorted(seats)).tolist(), 360.0 - max(seats) + min(seats)]
         assert min(gaps) > 115.0
+
+
+def _plan_from(mission_t_s, monkeypatch):
+    """The ArduPlane SITL mission's team where the simulator's ArduPlane personality had it at
+    the tracking command (side by side 60 m apart, 117.7 m north of the target, flying west):
+    each vehicle's status at 30.05 s says a heading of 181 degrees (counter-clockwise from
+    east); at the agents' planning tick, 30.1 s, each one's own telemetry says 182. Every agent
+    hears the mission's gather (at ``mission_t_s``; None: without a time, as an older ground
+    sent it), the statuses, then plans: the seat each took (degrees) and the poses each planned
+    from."""
+    config = load_config("ardupilot-sitl", MissionConfig)
+    plist = build_plan(config).agents
+    x = np.array([0.6, 0.0, 0.1, 0.0, 0.0, 0.0])
+    estimate = GlobalEstimate(30.0, x, np.eye(6), (("0", 1.0),))
+    speed = 14.0
+    team = tuple(p.vehicle for p in plist)
+    planned_from = []
+
+    def recorded(starts, *args, **kwargs):
+        planned_from.append([tuple(pose) for pose in starts])
+        return join_plan(starts, *args, **kwargs)
+
+    monkeypatch.setattr(logic, "join_plan", recorded)
+    seats = []
+    for i, p in enumerate(plist):
+        p = replace(p, agent=replace(p.agent, phase=replace(p.agent.phase, actuator="speed")))
+        state = logic.hear_fused(logic.initial_agent_state(p), estimate, p)
+        state, _ = logic.step(state, logic.HeardMission("gather", team, mission_t_s), p)
+        course = 0.5 * math.pi - math.radians(181.0)
+        for j, q in enumerate(plist):
+            east = -122.7 + 60.0 * j
+            if j == i:
+                status = OwnTelemetry(east, 117.7, course, speed)
+                state, _ = logic.step(state, logic.Telemetry(30.05, status), p)
+            else:
+                fix = logic.TeammateFix(30.05, east, 117.7, course, speed)
+                state, _ = logic.step(state, logic.HeardTeammate(q.vehicle, fix), p)
+        now = 0.5 * math.pi - math.radians(182.0)
+        own = OwnTelemetry(-122.7 + 60.0 * i - speed * 0.05, 117.7, now, speed, speed, (0.0, 0.0))
+        state, _, _ = logic.control(state, 30.1, own, p)
+        assert state.join is not None
+        seats.append(round(math.degrees(state.join.seat_angle_rad)) % 360)
+    return seats, planned_from
+
+
+def test_every_agent_plans_from_the_same_statuses_its_own_included(monkeypatch):
+    """Over MAVLink on this start, each agent planning from its own telemetry (a tick newer
+    than its status, 1 degree more turned) and its teammates' statuses, two placings 105
+    degrees apart were 0.09 s apart for the slowest flight: the agents split between them, two
+    seats came 15 degrees apart, and the team formed 17-28 s later than when they agreed.
+    Planned from every member's first status after the gather started, their own as published,
+    every agent plans from the very same poses, whatever the placings' costs."""
+    seats, planned_from = _plan_from(30.0, monkeypatch)
+    assert all(poses == planned_from[0] for poses in planned_from)
+    assert _gaps(seats) == [120, 120, 120]
+    _, own_views = _plan_from(None, monkeypatch)
+    assert any(poses != own_views[0] for poses in own_views)  # each from its own telemetry
+
+
+def _gaps(seats):
+    ordered = sorted(seats)
+    return sorted((b - a) % 360 for a, b in zip(ordered, [*ordered[1:], ordered[0]], strict=True))

@@ -205,6 +205,7 @@ def join_plan(
     wind: tuple[float, float] = (0.0, 0.0),
     band_s: float = 0.5,
     order: Sequence[int] | None = None,
+    min_speed_m_s: float | None = None,
 ) -> JoinPlan:
     """Seats 2 pi / n apart on the circle (``radius_m`` about ``centre``, flown
     counter-clockwise for ``sign`` +1), placed in one-degree steps and assigned to the vehicles
@@ -217,29 +218,48 @@ def join_plan(
     is that one; without it every assignment is tried, at most ``MAX_JOIN_TEAM`` vehicles (the
     slowest flight alone decides, so the others' seats are ties, broken by
     ``itertools.permutations`` order: agents whose views differ may break them differently,
-    which is why the mission gives the order). Ties of placings go to the smaller angle."""
+    which is why the mission gives the order). Ties of placings go to the smaller angle.
+
+    With ``min_speed_m_s`` (the slowest a vehicle can fly), a placing is as quick as its
+    slowest flight plus the most any vehicle must arrive before it: one whose shortest path
+    flown at the least speed is still quicker than the slowest flight reaches its seat that
+    much early (a fixed wing cannot wait), and the team is spaced only once the phase keeping
+    has taken the lead back. (On the ArduPlane personality's start, side by side, two placings
+    were both 34.9 s for the slowest; in one a vehicle had 285 m to fly and joined the circle
+    20 s before the team, and the team was spaced 30 s later than in the other.)"""
     n = len(starts)
     if not 1 <= n <= MAX_JOIN_TEAM:
         raise ValueError(f"1 to {MAX_JOIN_TEAM} vehicles, got {n}")
     if not (math.isfinite(speed_m_s) and speed_m_s > 0.0):
         raise ValueError(f"speed_m_s must be finite and > 0, got {speed_m_s!r}")
+    if min_speed_m_s is not None and not (0.0 < min_speed_m_s <= speed_m_s):
+        raise ValueError(f"min_speed_m_s must be in (0, speed_m_s], got {min_speed_m_s!r}")
     seats = [seat_pose(centre, radius_m, math.radians(k), sign) for k in range(360)]
+    paths = [[dubins(start, seat, turn_radius_m) for seat in seats] for start in starts]
     lengths = [
-        [
-            flight_time(start, dubins(start, seat, turn_radius_m), turn_radius_m, speed_m_s, wind)
-            for seat in seats
-        ]
-        for start in starts
+        [flight_time(start, path, turn_radius_m, speed_m_s, wind) for path in row]
+        for start, row in zip(starts, paths, strict=True)
     ]
-    # per placing k (degrees), the quickest assignment and its slowest flight
-    per_k: list[tuple[float, tuple[int, ...]]] = []
+    longest = (
+        None
+        if min_speed_m_s is None
+        else [
+            [flight_time(start, path, turn_radius_m, min_speed_m_s, wind) for path in row]
+            for start, row in zip(starts, paths, strict=True)
+        ]
+    )
+    # per placing k (degrees), the quickest assignment, its cost and its slowest flight
+    per_k: list[tuple[float, tuple[int, ...], float]] = []
     for k in range(360):
         angles = [round(k + 360.0 * j / n) % 360 for j in range(n)]
-        best_k = (math.inf, tuple(range(n)))
+        best_k = (math.inf, tuple(range(n)), math.inf)
         for each in itertools.permutations(range(n)) if order is None else (tuple(order),):
             slowest = max(lengths[v][angles[j]] for j, v in enumerate(each))
-            if slowest < best_k[0] - 1e-9:
-                best_k = (slowest, each)
+            cost = slowest
+            if longest is not None:
+                cost += max(0.0, slowest - min(longest[v][angles[j]] for j, v in enumerate(each)))
+            if cost < best_k[0] - 1e-9:
+                best_k = (cost, each, slowest)
         per_k.append(best_k)
     k_best = min(range(360), key=lambda k: per_k[k][0])
     quickest = per_k[k_best][0]
@@ -262,4 +282,4 @@ def join_plan(
     seat_of = [0.0] * n
     for j, v in enumerate(chosen):
         seat_of[v] = math.radians(round(k + 360.0 * j / n) % 360)
-    return JoinPlan(tuple(seat_of), per_k[k][0])
+    return JoinPlan(tuple(seat_of), per_k[k][2])

@@ -317,6 +317,11 @@ class MissionAgentState:
     separation_threat: int | None = None
     separation_band: bool = False
     separation_acted_t_s: float = -math.inf
+    #: what the team's joining is planned from (``gather_join = "seat"``): the ground's time
+    #: of the mission state that started gather or changed its team (None: not heard with a
+    #: time), and every member's first status at or after it (its own as published)
+    join_since_t_s: float | None = None
+    join_fixes: tuple[tuple[int, TeammateFix], ...] = ()
     #: the seat this vehicle flies to in gather (``gather_join = "seat"``), and whether this
     #: gather's joining leg is over (joined, or dropped)
     join: JoinTarget | None = None
@@ -476,12 +481,22 @@ def hear_mission(
 
 def hear_teammate(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
     """A teammate's newest position (older fixes than the one held are ignored)."""
+    state = _join_fix(state, vehicle, fix)
     held = dict(state.teammates)
     old = held.get(vehicle)
     if old is not None and fix.t_s < old.t_s:
         return state
     held[vehicle] = fix
     return replace(state, teammates=tuple(sorted(held.items())))
+
+
+def _join_fix(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
+    """Keep ``fix`` as the vehicle's pose to plan the joining from if it is its first at or
+    after ``join_since_t_s``: every agent keeps the same statuses, its own included."""
+    since = state.join_since_t_s
+    if since is None or fix.t_s < since or any(v == vehicle for v, _ in state.join_fixes):
+        return state
+    return replace(state, join_fixes=tuple(sorted((*state.join_fixes, (vehicle, fix)))))
 
 
 def set_holding(state: MissionAgentState, holding: bool) -> MissionAgentState:
@@ -923,7 +938,7 @@ def _control(
     state = replace(state, guidance=g)
     if params.gather_join == "seat":
         state, command, joining = _join_leg(
-            state, t_s, own, target, team, motion, index, agent, command, params, known_wind
+            state, t_s, own, target, team, motion, index, agent, command, params, known_wind, wind
         )
         events = (*events, *joining)
     if agent.guidance.orbit_plan == "ellipse":
@@ -1020,6 +1035,28 @@ _JOIN_REPLAN_M = 40.0
 _JOIN_LOOKAHEAD_S = 1.5
 
 
+def _agreed_starts(
+    state: MissionAgentState, max_age_s: float, air_wind: tuple[float, float] | None
+) -> list[tuple[float, float, float]] | None:
+    """Every active member's pose (east, north m, heading rad counter-clockwise from east) to
+    plan the joining from: its first status since the team was set (``join_fixes``), each
+    dead-reckoned to the newest of them, through the air mass where the agent flies in it;
+    None while one is missing. Every agent holds the same statuses, so plans from the same
+    poses (its own telemetry, a tick newer than its status, once made two agents choose
+    placings 105 degrees apart that their views put 0.09 s apart)."""
+    fixes = dict(state.join_fixes)
+    if any(vehicle not in fixes for vehicle in state.active):
+        return None
+    chosen = [fixes[vehicle] for vehicle in state.active]
+    t_ref = max(fix.t_s for fix in chosen)
+    out = []
+    for fix in chosen:
+        east, north = fix.at(t_ref, max_age_s)
+        course, _ = _air_motion(fix.course_rad, fix.speed_m_s, air_wind)
+        out.append((east, north, 0.5 * math.pi - course))
+    return out
+
+
 def _join_path(
     start: tuple[float, float, float],
     goal: tuple[float, float, float],
@@ -1046,6 +1083,7 @@ def _join_leg(
     command: Command,
     params: MissionAgentParams,
     known_wind: tuple[float, float] | None = None,
+    air_wind: tuple[float, float] | None = None,
 ) -> tuple[MissionAgentState, Command, tuple[AgentEvent, ...]]:
     """Gather with a seat each (``gather_join = "seat"``), in place of the field's ``command``
     until the vehicle is on its way round the circle.
@@ -1110,6 +1148,12 @@ def _join_leg(
         if params.vehicle not in state.active or n != len(state.active) or n < 2:
             # a teammate not heard yet, or none in the team yet: try again next tick
             return state, command, events
+        plan_from = starts
+        if state.join_since_t_s is not None:
+            agreed = _agreed_starts(state, params.max_age_s, air_wind)
+            if agreed is None:  # a member's first status since the team was set not heard yet
+                return state, command, events
+            plan_from = agreed
         if n > MAX_JOIN_TEAM or agent.phase.actuator != "speed":
             # too large a team to plan, or an autopilot that holds its own airspeed (the
             # arrivals are timed by the speed): the field
@@ -1119,11 +1163,23 @@ def _join_leg(
         # slowest's seat alike but could break the ties of the others' differently (over
         # MAVLink two agents once took the same seat)
         order = sorted(
-            range(n), key=lambda v: (math.atan2(team[v][1] - centre[1], team[v][0] - centre[0]), v)
+            range(n),
+            key=lambda v: (
+                math.atan2(plan_from[v][1] - centre[1], plan_from[v][0] - centre[0]),
+                v,
+            ),
         )
         try:
             plan = join_plan(
-                starts, centre, rd, sign, env.max_speed_m_s, turn_radius, wind, order=order
+                plan_from,
+                centre,
+                rd,
+                sign,
+                env.max_speed_m_s,
+                turn_radius,
+                wind,
+                order=order,
+                min_speed_m_s=env.min_speed_m_s,
             )
         except ValueError as exc:  # a wind no seat can be reached against: the field
             state = replace(state, join_done=True)
@@ -1136,7 +1192,7 @@ def _join_leg(
                 env.max_speed_m_s,
                 wind,
             )
-            for start, seat in zip(starts, plan.seat_angles_rad, strict=True)
+            for start, seat in zip(plan_from, plan.seat_angles_rad, strict=True)
         )
         join = JoinTarget(index, plan.seat_angles_rad, paths, t_s + plan.time_s)
         detail = (
@@ -1335,9 +1391,12 @@ def step(
         case Telemetry(t, own):
             if not state.statuses.due(t):
                 return state, _EMPTY
-            return replace(state, statuses=state.statuses.sent(t)), AgentOutbox(
-                status=_status(state, t, own, params)
+            status = _status(state, t, own, params)
+            own_fix = TeammateFix(
+                t, status.east_m, status.north_m, status.course_rad, status.speed_m_s
             )
+            state = replace(state, statuses=state.statuses.sent(t))
+            return _join_fix(state, params.vehicle, own_fix), AgentOutbox(status=status)
         case Control(t, own):
             if t > state.now_t_s:
                 state = replace(state, now_t_s=t)
@@ -1353,8 +1412,13 @@ def step(
             refused = ahead_of_clock(state, t, params) if t is not None else ""
             if refused:
                 return state, AgentOutbox(refused=refused)
-            before = state.stage
+            before, team = state.stage, state.active
             state = hear_mission(state, stage, active)
+            # every agent hears this message alike: the joining is planned from each member's
+            # first status after the one that started gather or changed its team
+            started = before != Stage.GATHER or state.active != team
+            if t is not None and state.stage == Stage.GATHER and started:
+                state = replace(state, join_since_t_s=t, join_fixes=())
             return state, AgentOutbox(stage=state.stage) if state.stage != before else _EMPTY
         case HeardTeammate(vehicle, fix):
             refused = ahead_of_clock(state, fix.t_s, params)
