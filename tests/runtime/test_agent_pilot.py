@@ -202,7 +202,9 @@ async def test_the_status_says_the_height_the_climb_and_the_level_it_is_sent_to(
     assert last.up_m is not None
     assert last.up_m == pytest.approx(10.0 + last.alt_m)
     assert last.climb_m_s == pytest.approx(3.0)
-    assert last.level_up_m == pytest.approx(10.0 + bring_up(plan, 1).altitude_m)
+    level = bring_up(plan, 1).altitude_m
+    assert level is not None
+    assert last.level_up_m == pytest.approx(10.0 + level)
 
 
 class ClimbingLink(QueueLink):
