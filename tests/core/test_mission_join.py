@@ -196,14 +196,15 @@ def test_agents_with_slightly_different_views_still_take_distinct_seats():
         assert min(gaps) > 115.0
 
 
-def _plan_from(mission_t_s, monkeypatch):
+def _plan_from(mission_t_s, monkeypatch, statuses_first=()):
     """The ArduPlane SITL mission's team where the simulator's ArduPlane personality had it at
     the tracking command (side by side 60 m apart, 117.7 m north of the target, flying west):
     each vehicle's status at 30.05 s says a heading of 181 degrees (counter-clockwise from
     east); at the agents' planning tick, 30.1 s, each one's own telemetry says 182. Every agent
     hears the mission's gather (at ``mission_t_s``; None: without a time, as an older ground
-    sent it), the statuses, then plans: the seat each took (degrees) and the poses each planned
-    from."""
+    sent it) and the statuses (the agents in ``statuses_first`` hear them, their own
+    included, before the mission state: a status stamped after it may come first), then
+    plans: the seat each took (degrees) and the poses each planned from."""
     config = load_config("ardupilot-sitl", MissionConfig)
     plist = build_plan(config).agents
     x = np.array([0.6, 0.0, 0.1, 0.0, 0.0, 0.0])
@@ -221,7 +222,10 @@ def _plan_from(mission_t_s, monkeypatch):
     for i, p in enumerate(plist):
         p = replace(p, agent=replace(p.agent, phase=replace(p.agent.phase, actuator="speed")))
         state = logic.hear_fused(logic.initial_agent_state(p), estimate, p)
-        state, _ = logic.step(state, logic.HeardMission("gather", team, mission_t_s), p)
+        state, _ = logic.step(state, logic.HeardMission("standby", team, 29.0), p)
+        gather = logic.HeardMission("gather", team, mission_t_s)
+        if i not in statuses_first:
+            state, _ = logic.step(state, gather, p)
         course = 0.5 * math.pi - math.radians(181.0)
         for j, q in enumerate(plist):
             east = -122.7 + 60.0 * j
@@ -231,6 +235,8 @@ def _plan_from(mission_t_s, monkeypatch):
             else:
                 fix = logic.TeammateFix(30.05, east, 117.7, course, speed)
                 state, _ = logic.step(state, logic.HeardTeammate(q.vehicle, fix), p)
+        if i in statuses_first:
+            state, _ = logic.step(state, gather, p)
         now = 0.5 * math.pi - math.radians(182.0)
         own = OwnTelemetry(-122.7 + 60.0 * i - speed * 0.05, 117.7, now, speed, speed, (0.0, 0.0))
         state, _, _ = logic.control(state, 30.1, own, p)
@@ -249,6 +255,10 @@ def test_every_agent_plans_from_the_same_statuses_its_own_included(monkeypatch):
     seats, planned_from = _plan_from(30.0, monkeypatch)
     assert all(poses == planned_from[0] for poses in planned_from)
     assert _gaps(seats) == [120, 120, 120]
+    # whether an agent heard the statuses before the mission state or after: the same poses
+    _, mixed = _plan_from(30.0, monkeypatch, statuses_first=(0, 2))
+    assert len(mixed) == 3
+    assert all(poses == planned_from[0] for poses in mixed)
     _, own_views = _plan_from(None, monkeypatch)
     assert any(poses != own_views[0] for poses in own_views)  # each from its own telemetry
 

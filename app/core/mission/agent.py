@@ -322,6 +322,9 @@ class MissionAgentState:
     #: time), and every member's first status at or after it (its own as published)
     join_since_t_s: float | None = None
     join_fixes: tuple[tuple[int, TeammateFix], ...] = ()
+    #: every member's last few statuses, its own included (a status stamped after that mission
+    #: state may come before it)
+    recent_fixes: tuple[tuple[int, TeammateFix], ...] = ()
     #: the seat this vehicle flies to in gather (``gather_join = "seat"``), and whether this
     #: gather's joining leg is over (joined, or dropped)
     join: JoinTarget | None = None
@@ -491,12 +494,34 @@ def hear_teammate(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> M
 
 
 def _join_fix(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
-    """Keep ``fix`` as the vehicle's pose to plan the joining from if it is its first at or
-    after ``join_since_t_s``: every agent keeps the same statuses, its own included."""
+    """Remember ``fix`` among the vehicle's last ``_RECENT_FIXES`` statuses, and keep it as the
+    vehicle's pose to plan the joining from if it is its first at or after
+    ``join_since_t_s``: every agent keeps the same statuses, its own included (teams of up to
+    ``dubins.MAX_JOIN_TEAM``)."""
+    if len(state.active) > MAX_JOIN_TEAM:
+        return state
+    mine = [f for v, f in state.recent_fixes if v == vehicle][-(_RECENT_FIXES - 1) :]
+    others = [(v, f) for v, f in state.recent_fixes if v != vehicle]
+    state = replace(state, recent_fixes=(*others, *((vehicle, f) for f in mine), (vehicle, fix)))
     since = state.join_since_t_s
     if since is None or fix.t_s < since or any(v == vehicle for v, _ in state.join_fixes):
         return state
     return replace(state, join_fixes=tuple(sorted((*state.join_fixes, (vehicle, fix)))))
+
+
+#: how many of each member's statuses an agent keeps for the joining plan (0.5 s at 10 Hz)
+_RECENT_FIXES = 5
+
+
+def _join_started(state: MissionAgentState, t_s: float) -> MissionAgentState:
+    """The team's joining is planned from each member's first status at or after ``t_s`` (the
+    ground's time of the mission state that started gather or changed its team): those
+    already heard, and those to come."""
+    first: dict[int, TeammateFix] = {}
+    for vehicle, fix in state.recent_fixes:
+        if fix.t_s >= t_s and (vehicle not in first or fix.t_s < first[vehicle].t_s):
+            first[vehicle] = fix
+    return replace(state, join_since_t_s=t_s, join_fixes=tuple(sorted(first.items())))
 
 
 def set_holding(state: MissionAgentState, holding: bool) -> MissionAgentState:
@@ -1418,7 +1443,7 @@ def step(
             # first status after the one that started gather or changed its team
             started = before != Stage.GATHER or state.active != team
             if t is not None and state.stage == Stage.GATHER and started:
-                state = replace(state, join_since_t_s=t, join_fixes=())
+                state = _join_started(state, t)
             return state, AgentOutbox(stage=state.stage) if state.stage != before else _EMPTY
         case HeardTeammate(vehicle, fix):
             refused = ahead_of_clock(state, fix.t_s, params)
