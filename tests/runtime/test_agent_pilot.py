@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
@@ -61,14 +62,16 @@ class Flyer:
             await asyncio.sleep(0.002)
 
 
-async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> None:
-    plan = build_plan(load_config("hil", MissionConfig))
+@asynccontextmanager
+async def agent_and_ground(
+    client_id: str,
+) -> AsyncIterator[tuple[InProcessBus, InProcessBus, list[bus.VehicleStatus], asyncio.TaskGroup]]:
+    """An agent's bus and the ground's on one in-process broker, every status the ground hears
+    in the list yielded, and a task group to run the agent in."""
     broker = InProcessBroker()
-    link = QueueLink()
-    events = Events()
     statuses: list[bus.VehicleStatus] = []
     async with (
-        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id=client_id) as agent_bus,
         InProcessBus(broker, client_id="ground") as ground,
         ground.subscribe(topics.ALL_STATUS) as heard,
         asyncio.TaskGroup() as tg,
@@ -79,13 +82,25 @@ async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> Non
                 if isinstance(message, bus.VehicleStatus):
                     statuses.append(message)
 
+        listener = tg.create_task(listen())
+        try:
+            yield agent_bus, ground, statuses, tg
+        finally:
+            listener.cancel()
+
+
+async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> None:
+    plan = build_plan(load_config("hil", MissionConfig))
+    link = QueueLink()
+    events = Events()
+    async with agent_and_ground("agent-1") as (agent_bus, ground, statuses, tg):
+
         def control() -> str:
             return statuses[-1].control
 
         def piloted() -> bool:
             return agent.pilot_has_control
 
-        listener = tg.create_task(listen())
         agent = VehicleAgent(plan.agents[0], link, agent_bus, events)
         running = tg.create_task(agent.run())
         fly = Flyer(link)
@@ -123,7 +138,6 @@ async def test_a_mode_change_by_someone_else_is_not_fought_until_resume() -> Non
         await until(lambda: link.sent > sent)
         await until(lambda: control() == "mission")
         running.cancel()
-        listener.cancel()
 
 
 async def test_the_commands_carry_the_wanted_course_rate_and_the_stack_altitude() -> None:
@@ -172,22 +186,8 @@ async def test_the_status_says_the_height_the_climb_and_the_level_it_is_sent_to(
     """What the teammates' separation guards predict a climb on: the vehicle's height about the
     origin, its climb rate, and its place in the stack about the origin (home 10 m above it)."""
     plan = build_plan(load_config("hil", MissionConfig))
-    broker = InProcessBroker()
     link = QueueLink()
-    statuses: list[bus.VehicleStatus] = []
-    async with (
-        InProcessBus(broker, client_id="agent-2") as agent_bus,
-        InProcessBus(broker, client_id="ground") as ground,
-        ground.subscribe(topics.ALL_STATUS) as heard,
-        asyncio.TaskGroup() as tg,
-    ):
-
-        async def listen() -> None:
-            async for _topic, message in heard:
-                if isinstance(message, bus.VehicleStatus):
-                    statuses.append(message)
-
-        listening = tg.create_task(listen())
+    async with agent_and_ground("agent-2") as (agent_bus, _ground, statuses, tg):
         agent = vehicle_agent(plan, 1, link, agent_bus, Events(), builtin=True)
         running = tg.create_task(agent.run())
         for k in range(30):
@@ -197,7 +197,6 @@ async def test_the_status_says_the_height_the_climb_and_the_level_it_is_sent_to(
             await asyncio.sleep(0.002)
         await until(lambda: len(statuses) >= 5)
         running.cancel()
-        listening.cancel()
     last = statuses[-1]
     assert last.up_m is not None
     assert last.up_m == pytest.approx(10.0 + last.alt_m)
