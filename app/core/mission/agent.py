@@ -1113,13 +1113,16 @@ def _join_leg(
     """Gather with a seat each (``gather_join = "seat"``), in place of the field's ``command``
     until the vehicle is on its way round the circle.
 
-    At the first gather tick with every active teammate's status fresh (a team of 2 to
-    ``dubins.MAX_JOIN_TEAM``), the agent plans the team's joining (``dubins.join_plan``: seats
-    2 pi / n apart, each vehicle's shortest path at the top speed, the slowest flight as quick
-    as can be, timed in the wind the agent knows) and every member's path from the poses it
-    knows; every agent plans from the same statuses, so the plans agree. The paths turn on
-    ``_JOIN_TURN_MARGIN`` times the tightest turn at the top speed over the ground (the
-    airspeed plus the wind), which leaves course rate to follow them with. Each tick:
+    At the first gather tick at which it holds every active member's first status since the
+    mission state that started gather or changed the team (``_agreed_starts``, its own as it
+    published it; a team of 2 to ``dubins.MAX_JOIN_TEAM``), the agent plans the team's joining
+    (``dubins.join_plan``: seats 2 pi / n apart, each vehicle's shortest path at the top speed,
+    the slowest flight plus the earliest arrival as short as can be, timed in the wind the
+    agent knows) and every member's path; every agent plans from the same statuses, so the
+    plans agree (a ground without the mission state's time: from the poses it knows now). The
+    paths turn on ``_JOIN_TURN_MARGIN`` times the tightest turn at the top speed over the
+    ground (the airspeed plus the wind), which leaves course rate to follow them with. Each
+    tick:
 
     - the team's time is taken again: when the slowest member not yet at its seat, going on
       along its path at the plan's speed from the point of it nearest its status, gets there
