@@ -2,7 +2,7 @@
 
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
-      [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30]
+      [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30] [--windows 10]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -36,6 +36,11 @@ target carried on at its present velocity, and flies the first S s of that plan 
 airframes: what a controller that knows the target exactly *now*, but not what it will do next,
 could do. Between the two oracles lies the price of foresight; between the causal one and the
 mission, what a better causal controller could still gain.
+
+``--windows W`` also prints, per seed and over all seeds, the RMS distance error of the mission,
+the oracle (and the causal optimiser) in windows of W s from the segment's start, with each
+window's share of the segment's sum of squares: where in the segment the mission loses to the
+optimum (over C-D, the stop at D: what the oracle, knowing it, is ready for).
 
 Prints per seed the mission's figures, the oracle's, their ratio, the largest distance errors
 (mission, oracle), and the team's state at the segment's start (distance errors, speeds,
@@ -443,6 +448,69 @@ def blind_approach(
     return f.position[k_seg], f.heading[k_seg], f.speed[k_seg], line
 
 
+def windowed(errors: Array, dt_s: float, window_s: float) -> list[tuple[float, float, float]]:
+    """Per window of ``window_s`` over ``errors`` (rows ``dt_s`` apart, the first at 0 s; one
+    column per vehicle): (the window's start s, its RMS, its share of the whole sum of
+    squares). The last window may be short."""
+    if not (math.isfinite(window_s) and window_s > 0.0):
+        raise ValueError(f"window_s must be finite and > 0, got {window_s!r}")
+    squares = np.asarray(errors, dtype=np.float64) ** 2
+    total = float(np.sum(squares))
+    per = max(1, round(window_s / dt_s))
+    out = []
+    for k in range(0, squares.shape[0], per):
+        part = squares[k : k + per]
+        share = float(np.sum(part)) / total if total > 0.0 else 0.0
+        out.append((k * dt_s, math.sqrt(float(np.mean(part))), share))
+    return out
+
+
+def pooled_windows(
+    squares: list[Array], dt_s: float, window_s: float
+) -> list[tuple[float, float, float]]:
+    """``windowed`` over several flights' squared errors at once: each window's RMS over every
+    flight's rows in it, and its share of all the flights' squares."""
+    per = max(1, round(window_s / dt_s))
+    longest = max(a.shape[0] for a in squares)
+    total = sum(float(np.sum(a)) for a in squares)
+    out = []
+    for k in range(0, longest, per):
+        parts = [a[k : k + per] for a in squares if a.shape[0] > k]
+        summed = sum(float(np.sum(p)) for p in parts)
+        count = sum(p.size for p in parts)
+        out.append((k * dt_s, math.sqrt(summed / count), summed / total if total > 0.0 else 0.0))
+    return out
+
+
+def mission_errors(samples: list[TeamSample], problem: Problem, t0: float) -> Array:
+    """The mission's |distance error| (m) at each of the problem's steps from ``t0`` (the
+    sample nearest in time; about the problem's true target), one column per vehicle."""
+    times = np.array([s.t_s for s in samples])
+    rows = []
+    for k in range(problem.steps + 1):
+        sample = samples[int(np.argmin(np.abs(times - (t0 + k * problem.dt_s))))]
+        east, north = problem.target[k]
+        rows.append(
+            [
+                abs(math.hypot(v.east_m - east, v.north_m - north) - problem.radius_m)
+                for v in sample.vehicles
+            ]
+        )
+    return np.array(rows)
+
+
+def _print_windows(columns: dict[str, list[tuple[float, float, float]]], window_s: float) -> None:
+    names = list(columns)
+    print(
+        f"  RMS distance error by window (s from the segment's start): {' / '.join(names)} m "
+        f"(share of the segment's sum of squares)"
+    )
+    for i, (start, _, _) in enumerate(columns[names[0]]):
+        rms = " / ".join(f"{columns[n][i][1]:6.2f}" for n in names)
+        share = " / ".join(f"{columns[n][i][2]:.2f}" for n in names)
+        print(f"    {start:5.0f}-{start + window_s:<5.0f} {rms}  ({share})")
+
+
 def case(
     name: str,
     samples: list[TeamSample],
@@ -452,11 +520,14 @@ def case(
     airframe: Airframe,
     seed: int,
     mission_max_m: float = math.nan,
+    window_squares: dict[str, list[Array]] | None = None,
 ) -> tuple[float, ...]:
     """The oracle from the team's state at the segment's start; prints and returns
     (mission distance, mission spacing, oracle distance, oracle spacing) RMS, the largest
     distance errors (mission's, ``mission_max_m`` where known, then the oracle's), and the
-    causal optimiser's distance, spacing and largest error (nan without ``--causal``)."""
+    causal optimiser's distance, spacing and largest error (nan without ``--causal``). With
+    ``args.windows`` it prints the windows (``windowed``) and appends each flight's squared
+    distance errors over the segment to ``window_squares`` (for the means over the seeds)."""
     t_start = time.perf_counter()
     seg = [s for s in samples if s.target_segment == args.segment]
     t0, t1 = seg[0].t_s - args.lead, seg[-1].t_s
@@ -527,6 +598,7 @@ def case(
         f"{best.dist_max_m:6.2f} m | mission/oracle {mission_max_m / best.dist_max_m:.2f}"
     )
     causal = (math.nan, math.nan, math.nan)
+    causal_errors = None
     if getattr(args, "causal", 0.0) > 0.0 and args.lead == 0.0 and not approach:
         t_causal = time.perf_counter()
         velocity = np.array([[q.v_east_m_s, q.v_north_m_s] for q in path])
@@ -534,7 +606,8 @@ def case(
             problem, velocity, flown, args.causal, args.causal_horizon, args.causal_iter
         )
         dist, spacing = figures(problem, flight)
-        worst = float(np.max(np.abs(errors(problem, flight)[0][problem.score_from :])))
+        causal_errors = np.abs(errors(problem, flight)[0])
+        worst = float(np.max(causal_errors[problem.score_from :]))
         causal = (dist, spacing, worst)
         print(
             f"  causal (replanned every {args.causal:g} s, {args.causal_horizon:g} s ahead on "
@@ -543,6 +616,19 @@ def case(
             f"largest {mission_max_m / worst:.2f}  [{time.perf_counter() - t_causal:.0f} s]",
             flush=True,
         )
+    window_s = getattr(args, "windows", 0.0)
+    if window_s > 0.0:
+        k0 = problem.score_from
+        flights = {
+            "mission": mission_errors(samples, problem, t0)[k0:],
+            "oracle": np.abs(errors(problem, best.flight)[0][k0:]),
+        }
+        if causal_errors is not None:
+            flights["causal"] = causal_errors[k0:]
+        _print_windows({f: windowed(e, args.dt, window_s) for f, e in flights.items()}, window_s)
+        if window_squares is not None:
+            for f, e in flights.items():
+                window_squares.setdefault(f, []).append(e**2)
     return (
         mission[0],
         mission[1],
@@ -620,6 +706,14 @@ def main() -> None:
         "--gusts", type=float, default=0.0, help="the mission's gusts with --wind (m/s, 0)"
     )
     ap.add_argument(
+        "--windows",
+        type=float,
+        default=0.0,
+        metavar="W",
+        help="also print the RMS distance errors in windows of W s from the segment's start "
+        "(0: not printed)",
+    )
+    ap.add_argument(
         "--planner",
         choices=("field", "horizon"),
         default=None,
@@ -662,6 +756,7 @@ def main() -> None:
         )
     )
     rows = []
+    window_squares: dict[str, list[Array]] = {}
     for seed in args.seeds:
         config = base.model_copy(
             update={"tracking_command_s": base.tracking_command_s + args.vary_command * seed}
@@ -680,6 +775,7 @@ def main() -> None:
                 airframe,
                 seed,
                 figs["dist_max_m"],
+                window_squares,
             )
         )
     plan = build_plan(base)
@@ -698,6 +794,7 @@ def main() -> None:
                 airframe,
                 100 + i,
                 float(worst.get("max_abs", math.nan)),
+                window_squares,
             )
         )
     m = np.mean(np.array(rows), axis=0)  # the causal columns are nan where not flown
@@ -708,6 +805,12 @@ def main() -> None:
         f"in {met} of {len(rows)}; largest distance error: mission {m[4]:.2f} m, oracle "
         f"{m[5]:.2f} m, mission/oracle {m[4] / m[5]:.2f}"
     )
+    if window_squares:
+        print("over all seeds and runs:")
+        _print_windows(
+            {k: pooled_windows(v, args.dt, args.windows) for k, v in window_squares.items()},
+            args.windows,
+        )
     if args.causal > 0.0:
         print(
             f"mean causal: {m[6]:.2f} m {m[7]:.2f} deg, largest {m[8]:.2f} m; mission/causal "

@@ -22,9 +22,12 @@ from benchmarks.bench_oracle import (
     cost_and_gradient,
     figures,
     fly,
+    mission_errors,
+    pooled_windows,
     run_figures,
     run_samples,
     solve,
+    windowed,
 )
 
 AIRFRAME = Airframe(10.0, 18.0, 2.0, 0.2)
@@ -117,6 +120,58 @@ def test_it_cannot_hold_a_circle_tighter_than_the_airframe_turns():
     flight = fly(problem, np.zeros((steps, 1)), np.zeros((steps, 1)))
     assert flight.position.shape == (steps + 1, 1, 2)
     assert 5.0 < best.dist_rms_m < 15.0
+
+
+def test_the_windows_say_where_in_the_segment_the_error_is():
+    # two vehicles over 25 s at 0.5 s: 3 m off for the first 10 s, 1 m after, except one
+    # vehicle 8 m off over 20-25 s (a stop at the segment's end that only one overshoots)
+    errors = np.full((50, 2), 1.0)
+    errors[:20] = 3.0
+    errors[40:, 1] = 8.0
+    rows = windowed(errors, 0.5, 10.0)
+    assert [start for start, _, _ in rows] == [0.0, 10.0, 20.0]
+    total = 20 * 2 * 9.0 + 20 * 2 * 1.0 + 10 * (1.0 + 64.0)
+    assert rows[0][1] == pytest.approx(3.0)
+    assert rows[1][1] == pytest.approx(1.0)
+    assert rows[2][1] == pytest.approx(math.sqrt((1.0 + 64.0) / 2))
+    assert rows[0][2] == pytest.approx(360.0 / total)
+    assert rows[2][2] == pytest.approx(650.0 / total)
+    assert sum(share for _, _, share in rows) == pytest.approx(1.0)
+    # pooled over two flights, a shorter one too: each window over every row in it
+    pooled = pooled_windows([errors**2, np.full((30, 2), 2.0) ** 2], 0.5, 10.0)
+    assert len(pooled) == 3
+    assert pooled[0][1] == pytest.approx(math.sqrt((40 * 9.0 + 40 * 4.0) / 80))
+    assert pooled[1][1] == pytest.approx(math.sqrt((40 * 1.0 + 20 * 4.0) / 60))
+    assert pooled[2][1] == rows[2][1]
+    assert sum(share for _, _, share in pooled) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="window_s"):
+        windowed(errors, 0.5, 0.0)
+
+
+def test_the_missions_errors_are_taken_at_the_oracles_steps_about_the_true_target():
+    # a vehicle 100 m east of a target that drives north at 5 m/s: 10 m off the 90 m circle at
+    # first, then farther as the target leaves it; samples every 0.1 s, oracle steps every 0.2 s
+    target = np.array([[0.0, 1.0 * k] for k in range(11)])
+    problem = Problem(
+        position=np.array([[100.0, 0.0]]),
+        heading=np.array([math.pi / 2]),
+        speed=np.array([14.0]),
+        target=target,
+        dt_s=0.2,
+        radius_m=90.0,
+        airframe=AIRFRAME,
+    )
+    samples = [
+        TeamSample(
+            5.0 + 0.1 * k, "track", "A-B", 0.0, 0.5 * k, 0.0, 5.0, None,
+            (VehicleSample(0, True, 100.0, 0.0, 14.0),),
+        )
+        for k in range(25)
+    ]  # fmt: skip
+    got = mission_errors(samples, problem, 5.0)
+    assert got.shape == (11, 1)
+    want = [abs(math.hypot(100.0, float(k)) - 90.0) for k in range(11)]
+    assert got[:, 0] == pytest.approx(want)
 
 
 @pytest.mark.slow
