@@ -19,8 +19,10 @@ all on the same seeds:
 - +both: planned with the cap and the latency compensation;
 - +slow: +latency with a long turn flown slow (``GuidanceParams.turn_slow_rad`` from the
   config, ``[guidance] track_turn_slow_deg``: the ground speed capped on a ramp of the course
-  error down to the minimum), the mission's default track stage; the variants above have it
-  off;
+  error down to the minimum), the mission's default track stage before ``track_c``; the
+  variants above have it off (every variant keeps the config's track phase gain);
+- config: the track stage as the config has it (for ``hil``: +slow flown with c = 1.2,
+  ``[guidance] track_law = "fixed"``, ``track_c``);
 - with ``--horizon``, also +horizon: +latency with the receding-horizon planner
   (``planner="horizon"``, ``app.core.guidance.horizon``: the team's course rates and speeds
   planned 40 s ahead on the estimate every 2 s), printed with the agents' CPU per run;
@@ -155,6 +157,7 @@ def variants(
     }
     if slow is not None:
         out["+slow"] = variant(plan, lag, HOLD_S, **(planned | {"turn_slow_rad": slow}))
+    out["config"] = variant(plan, lag, HOLD_S)
     if horizon:
         out["+horizon"] = variant(plan, lag, HOLD_S, **(planned | {"planner": "horizon"}))
     if lead_speed_m_s is not None:

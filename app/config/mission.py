@@ -36,7 +36,8 @@ class MissionGuidanceConfig(GuidanceConfig):
     stage the inverse-field switch is off and ``track_law`` / ``track_orbit_plan`` apply:
     ``circle`` is the paper's orbit, ``ellipse`` the flyable orbit planned around a target too
     fast for the circle (docs/guidance.md); ``track_law = "paper"`` flies the track stage
-    exactly like the approach.
+    exactly like the approach; ``track_law = "fixed"`` flies the field with ``track_c`` (or,
+    without it, ``c``).
     ``track_speed_cap``: cap the ground speed in the track stage where the orbit around the
     moving target would need more turn rate than the vehicle has (``GuidanceParams.speed_cap``).
     ``track_turn_slow_deg``: (start, full) course errors, deg: in the track stage, where the
@@ -68,6 +69,7 @@ class MissionGuidanceConfig(GuidanceConfig):
     ``app.core.guidance.dubins``, docs/mission.md "Gather"."""
 
     track_law: Literal["paper", "proposed", "frew", "fixed"] = "frew"
+    track_c: Positive | None = None
     track_orbit_plan: Literal["circle", "ellipse"] = "ellipse"
     track_speed_cap: bool = False
     track_turn_slow_deg: tuple[NonNegative, Annotated[float, Field(gt=0.0, le=180.0)]] | None = (
@@ -82,6 +84,12 @@ class MissionGuidanceConfig(GuidanceConfig):
     track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=2.0)] = 40.0
     track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 2.0
     gather_join: Literal["point", "seat"] = "seat"
+
+    @model_validator(mode="after")
+    def _fixed_track_needs_c(self) -> "MissionGuidanceConfig":
+        if self.track_law == "fixed" and self.track_c is None and self.c is None:
+            raise ValueError("track_law 'fixed' needs track_c (or c)")
+        return self
 
     @field_validator("track_turn_slow_deg")
     @classmethod

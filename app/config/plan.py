@@ -77,6 +77,7 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
         track_guidance = replace(
             guidance,
             law=g.law if g.track_law == "paper" else g.track_law,
+            c=g.track_c if g.track_law == "fixed" and g.track_c is not None else g.c,
             inverse_field=False,
             orbit_plan=g.track_orbit_plan,
             speed_cap=g.track_speed_cap,

@@ -174,6 +174,33 @@ def test_track_stage_settings_reach_only_the_track_parameters():
         assert (agent.latency_s, agent.hold_s) == (0.08, 0.2)
 
 
+def test_the_track_stages_c_is_its_own_and_a_fixed_track_law_needs_one():
+    base = load_config("hil", MissionConfig)
+    assert (base.guidance.track_law, base.guidance.track_c) == ("fixed", 1.2)
+    for agent in build_plan(base).agents:
+        assert agent.track is not None
+        assert (agent.track.guidance.law, agent.track.guidance.c) == ("fixed", 1.2)
+        # the approach keeps its own law (the optimal c)
+        assert (agent.agent.guidance.law, agent.agent.guidance.c) == ("proposed", None)
+    frew = base.guidance.model_copy(update={"track_law": "frew"})
+    track = build_plan(base.model_copy(update={"guidance": frew})).agents[0].track
+    assert track is not None
+    assert track.guidance.law == "frew"
+    guidance = {**BASE["guidance"], "track_c": None}
+    with pytest.raises(ConfigError, match="track_law 'fixed' needs track_c"):
+        validate_config({**BASE, "guidance": guidance}, MissionConfig, source="m.toml")
+    with pytest.raises(ConfigError, match=r"guidance\.track_c"):
+        validate_config(
+            {**BASE, "guidance": {**guidance, "track_c": -1.0}}, MissionConfig, source="m.toml"
+        )
+    # without track_c, a fixed track law flies the approach's c
+    fixed = {**guidance, "law": "fixed", "c": 3.0}
+    config = validate_config({**BASE, "guidance": fixed}, MissionConfig, source="m.toml")
+    track = build_plan(config).agents[0].track
+    assert track is not None
+    assert track.guidance.c == 3.0
+
+
 def test_the_receding_horizon_planner_is_a_track_stage_setting():
     base = load_config("hil", MissionConfig)
     for agent in build_plan(base).agents:
