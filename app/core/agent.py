@@ -185,7 +185,9 @@ class PhaseParams:
     ``lead_speed_m_s`` (speed actuator only): the vehicle furthest behind its seat (the largest
     error) flies this speed and every other one the law's speed for its error minus that
     largest one, so that the team closes its gaps at the lead speed instead of about cruise
-    (None: about cruise, the paper's law).
+    (None: about cruise, the paper's law). Outside the circle, at distance r, the lead is held
+    to W r_d^2 / r (W the course-rate limit): at W r_d itself the circle takes the whole turn,
+    and a leader blown out would stay out.
 
     ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
     too: at ground speed s on a circle around a target moving at v_t the relative speed along
@@ -534,6 +536,11 @@ def _speed_command(
         # the law: the team closes its gaps at the lead speed (not about cruise); the radius
         # actuator's wanted speed stays about cruise (it holds its speed)
         error, base = error - max(errors), ph.lead_speed_m_s
+        if own_r > radius_m:
+            # outside the circle, no faster than the speed whose full turn rate tightens the
+            # orbit (v / W <= r_d^2 / r < r_d): at W r_d itself there is no turn to spare, and a
+            # leader blown out stays out until its speed drops
+            base = min(base, env.max_course_rate_rad_s * radius_m * radius_m / own_r)
     return phase.phase_speed(
         error,
         own_r,

@@ -176,6 +176,31 @@ def test_a_lead_speed_flies_the_vehicle_furthest_behind_at_it_and_the_rest_slowe
         PhaseParams("paper", lead_speed_m_s=math.nan)
 
 
+def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in() -> None:
+    """At the lead speed W r_d the circle takes the whole turn-rate limit W; a leader blown
+    outside it is held to W r_d^2 / r, whose full turn is tighter than the circle, and flies
+    the lead speed again on or inside it."""
+    rd, lead = 110.0, 0.2 * 110.0  # W r_d = 22 m/s
+
+    def leader_speed(radius_m: float) -> float:
+        angles = (0.0, 30.0, 50.0)  # vehicle 2 is furthest behind its seat
+        team = tuple(
+            (r * math.cos(math.radians(a)), r * math.sin(math.radians(a)))
+            for r, a in zip((rd, rd, radius_m), angles, strict=True)
+        )
+        params = AgentParams(
+            2, ENV, GuidanceParams(rd), PhaseParams("paper", 0.005, lead_speed_m_s=lead)
+        )
+        e, n = team[2]
+        inputs = _inputs(e, n, -math.atan2(n, e), 20.0, team=team)
+        return agent_step(AgentState(), inputs, params)[1].speed_m_s
+
+    assert leader_speed(rd) == pytest.approx(lead)
+    assert leader_speed(rd - 8.0) == pytest.approx(lead)
+    assert leader_speed(rd + 10.0) == pytest.approx(0.2 * rd * rd / (rd + 10.0))
+    assert leader_speed(rd + 10.0) < lead - 1.5
+
+
 def test_moving_target_speed_is_relative_to_the_target():
     target = TargetInfo(0.0, 0.0, 5.0, 0.0)
     _, cmd, _ = agent_step(AgentState(), _inputs(300.0, 0.0, 0.0, 20.0, target=target), PARAMS)
