@@ -85,6 +85,23 @@ def run_starts(run_dir: Path) -> tuple[list[Pose], float, float | None]:
     return [starts[v] for v in sorted(starts)], command, formed
 
 
+def run_bounds(run_dir: Path, cfg: MissionConfig) -> tuple[float, float, float | None]:
+    """(one joining point, a seat each, measured): the bounds from where a run folder's team
+    was at the tracking command (``run_starts``), at ``cfg``'s top speed and tightest turn onto
+    its circle about the target's start, beside the formation time the run measured (s after
+    the command; None: never)."""
+    starts, _, formed = run_starts(run_dir)
+    lim = cfg.limits
+    speed = lim.max_speed_m_s
+    target = cfg.target
+    centre = (getattr(target, "start_east_m", 0.0), getattr(target, "start_north_m", 0.0))
+    sign = 1 if cfg.orbit == "ccw" else -1
+    one, each = gather_times(
+        starts, centre, cfg.radius_m, sign, speed, speed / lim.max_course_rate_rad_s
+    )
+    return one, each, formed
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("config", nargs="?", default="hil")
@@ -133,8 +150,10 @@ def main() -> None:
         f"{max(r[1] for r in rows):.1f} s"
     )
     for run_dir in args.run:
-        starts, command, formed = run_starts(run_dir)
-        one, each = gather_times(starts, centre, cfg.radius_m, sign, speed, turn)
+        command = float(
+            json.loads((run_dir / "config.json").read_text())["mission"]["tracking_command_s"]
+        )
+        one, each, formed = run_bounds(run_dir, cfg)
         measured = "never" if formed is None else f"{formed:.1f} s"
         print(
             f"run {run_dir} (command at {command:g} s): formed {measured}; from where the team "

@@ -14,8 +14,10 @@ spinning on the CPU at the app's own priority (``while True: pass``, started bef
 mission, stopped after it; default 0 and 2). The first variant is the baseline. Run k flies the
 simulator's seed + k - 1 with its tracking command (k - 1) * ``--vary-command`` s later, the
 variants of one k one after the other so that whatever else loads the machine falls on them
-alike. Prints per variant the means over the runs of the formation time and every track
-segment's RMS distance and spacing error, with ratios to the baseline, then the CPU per
+alike. Prints per variant the means over the runs of the formation time, the formation bound
+from where the team was at the tracking command (``bench_gather_bound``, a seat each: run k's
+command finds the standby loiter elsewhere, and the bound moves by several seconds), and every
+track segment's RMS distance and spacing error, with ratios to the baseline, then the CPU per
 vehicle at 1x real time (the agents' own, the whole process, and with the simulator and
 mavsdk_server processes), the share of telemetry frames the agents steered past because a
 tick was still running (``frames_skipped``), the longest a steered frame waited, and the load
@@ -41,6 +43,8 @@ from typing import Any
 
 from app.config import load_config
 from app.config.mission import MissionConfig
+from app.core.guidance.dubins import MAX_JOIN_TEAM
+from benchmarks.bench_gather_bound import run_bounds
 from benchmarks.mavlink_runs import Figures, cell, figures_of, fly_mavlink, mean
 
 SPIN = "while True: pass"
@@ -139,11 +143,19 @@ def main() -> None:
                 load = os.getloadavg()[0]
             finally:
                 stopped(spinners)
-            flown.setdefault((n, busy), []).append(figures_of(summary))
+            figures = figures_of(summary)
+            bound = _seat_bound(out_dir, variant)
+            formed = figures.get("formation_s")
+            flown.setdefault((n, busy), []).append(
+                {"formation_s": formed} | ({} if bound is None else {"bound_s": bound}) | figures
+            )
             loads.setdefault((n, busy), []).append(load_figures(summary) | {"load avg": load})
             print(
                 f"  flown: run {k}, {_name(n, busy)} ({time.monotonic() - start:.0f} s wall,"
-                f" {out_dir})",
+                f" {out_dir}): formed "
+                + ("never" if formed is None else f"{formed:.1f} s")
+                + ("" if bound is None else f", the bound from where the team was {bound:.1f} s")
+                + ("" if formed is None or not bound else f" ({formed / bound:.2f}x)"),
                 flush=True,
             )
     base = mean(flown[variants[0]])
@@ -151,7 +163,7 @@ def main() -> None:
     print(f"\n{'run':<22}" + "".join(f"{k:>14}" for k in keys))
     for v in variants:
         figures = mean(flown[v])
-        cells = "".join(f"{cell(figures.get(k), base.get(k)):>14}" for k in keys)
+        cells = "".join(f"{_cell(k, figures, base):>14}" for k in keys)
         print(f"{_name(*v):<22}{cells}")
     load_keys = list(loads[variants[0]][0])
     print(f"\n{'run':<22}" + "".join(f"{k:>13}" for k in load_keys))
@@ -159,12 +171,31 @@ def main() -> None:
         means = mean(loads[v])
         print(f"{_name(*v):<22}" + "".join(f"{_number(means.get(k)):>13}" for k in load_keys))
     print(
-        "\n(formation: s after the tracking command; dist: RMS distance error m; spacing: RMS"
+        "\n(formation: s after the tracking command; bound: the same from where the team was at"
+        " the command, at the top speed on the tightest turn, a seat each (bench_gather_bound);"
+        " dist: RMS distance error m; spacing: RMS"
         " spacing error deg; means over the runs (never: some run did not form), ratios against"
         " the first row. CPU: % of one core per vehicle at 1x real time: the agents' own"
         " steps, the whole app process, and with its children (simulator, mavsdk_server);"
         " skipped: telemetry frames steered past because a tick was still running)"
     )
+
+
+def _seat_bound(run_dir: Path, config: MissionConfig) -> float | None:
+    """The formation bound from where the run's team was at the tracking command
+    (``bench_gather_bound``: a seat each, at the top speed on the tightest turn); None for a
+    team larger than the seat search takes or a run folder without a track."""
+    if config.vehicles > MAX_JOIN_TEAM or not (run_dir / "track.csv").exists():
+        return None
+    return run_bounds(run_dir, config)[1]
+
+
+def _cell(key: str, figures: Figures, base: Figures) -> str:
+    """A figure with its ratio to the baseline's; a bound no run had (a team too large to
+    search) is left blank, not ``never``."""
+    if key == "bound_s" and figures.get(key) is None:
+        return "-"
+    return cell(figures.get(key), base.get(key))
 
 
 def _name(vehicles: int, busy: int) -> str:

@@ -6,8 +6,10 @@ import math
 
 import pytest
 
+from app.config import load_config
+from app.config.mission import MissionConfig
 from app.core.guidance.dubins import dubins, seat_pose
-from benchmarks.bench_gather_bound import gather_times, run_starts
+from benchmarks.bench_gather_bound import gather_times, run_bounds, run_starts
 
 R = 90.0
 
@@ -52,3 +54,25 @@ def test_the_team_at_the_tracking_command_is_read_from_a_run_folder(tmp_path):
         pytest.approx((-989.0, 5.0, math.pi / 2 - 0.5)),
         pytest.approx((-988.0, 10.0, math.pi / 2 - 1.0)),
     ]
+
+
+def test_a_runs_bounds_are_taken_from_where_its_team_was_on_its_configs_circle(tmp_path):
+    # bench_load prints these beside each run's formation time
+    cfg = load_config("hil", MissionConfig)
+    (tmp_path / "config.json").write_text(json.dumps({"mission": {"tracking_command_s": 10.0}}))
+    (tmp_path / "summary.json").write_text(json.dumps({"convergence": {}}))
+    rows = ["t_s,vehicle,east_m,north_m,course_rad,speed_m_s"]
+    poses = {1: (-850.0, 98.0, 0.0), 2: (-950.0, 30.0, 1.0), 3: (-1050.0, -40.0, 2.0)}
+    for v, (e, n, course) in poses.items():
+        rows.append(f"10.0,{v},{e},{n},{course},14.0")
+    (tmp_path / "track.csv").write_text("\n".join(rows) + "\n")
+    one, each, formed = run_bounds(tmp_path, cfg)
+    assert formed is None
+    speed = cfg.limits.max_speed_m_s
+    starts = [(e, n, math.pi / 2 - c) for e, n, c in poses.values()]
+    turn = speed / cfg.limits.max_course_rate_rad_s
+    assert (one, each) == pytest.approx(
+        gather_times(starts, (0.0, 0.0), cfg.radius_m, 1, speed, turn)
+    )
+    # about 1 km from the circle at 18 m/s: about a minute, more with the turns
+    assert 50.0 < each < one < 100.0
