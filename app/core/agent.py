@@ -185,9 +185,9 @@ class PhaseParams:
     ``lead_speed_m_s`` (speed actuator only): the vehicle furthest behind its seat (the largest
     error) flies this speed and every other one the law's speed for its error minus that
     largest one, so that the team closes its gaps at the lead speed instead of about cruise
-    (None: about cruise, the paper's law). Outside the circle, at distance r, the lead is held
-    to W r_d^2 / r (W the course-rate limit): at W r_d itself the circle takes the whole turn,
-    and a leader blown out would stay out.
+    (None: about cruise, the paper's law). Up to 10 m outside the circle, at distance r, the lead
+    is held to W r_d^2 / r (W the course-rate limit), fading back to the lead by 20 m out: at
+    W r_d itself the circle takes the whole turn, and a leader blown out would stay out.
 
     ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
     too: at ground speed s on a circle around a target moving at v_t the relative speed along
@@ -494,6 +494,11 @@ def _guidance_c(
     return replace(state, c=c, c_speed_m_s=max(speed_m_s, 1e-9), c_law=g.law, c_radius_m=radius_m)
 
 
+#: how far outside the circle a leader is held to W r_d^2 / r (``PhaseParams.lead_speed_m_s``);
+#: the hold fades out over as far again
+_LEAD_BAND_M = 10.0
+
+
 def _speed_command(
     inputs: AgentInputs, params: AgentParams, state: AgentState, radius_m: float
 ) -> float:
@@ -536,11 +541,14 @@ def _speed_command(
         # the law: the team closes its gaps at the lead speed (not about cruise); the radius
         # actuator's wanted speed stays about cruise (it holds its speed)
         error, base = error - max(errors), ph.lead_speed_m_s
-        if own_r > radius_m:
-            # outside the circle, no faster than the speed whose full turn rate tightens the
-            # orbit (v / W <= r_d^2 / r < r_d): at W r_d itself there is no turn to spare, and a
-            # leader blown out stays out until its speed drops
-            base = min(base, env.max_course_rate_rad_s * radius_m * radius_m / own_r)
+        if radius_m < own_r < radius_m + 2.0 * _LEAD_BAND_M:
+            # just outside the circle, no faster than the speed whose full turn rate tightens
+            # the orbit (v / W <= r_d^2 / r < r_d): at W r_d itself there is no turn to spare,
+            # and a leader blown out stays out until its speed drops; faded out over a second
+            # band (a leader still flying in from afar keeps the lead)
+            cap = env.max_course_rate_rad_s * radius_m * radius_m / own_r
+            fade = min(1.0, (radius_m + 2.0 * _LEAD_BAND_M - own_r) / _LEAD_BAND_M)
+            base = min(base, base - fade * (base - cap))
     return phase.phase_speed(
         error,
         own_r,

@@ -199,6 +199,10 @@ def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in(
     assert leader_speed(rd - 8.0) == pytest.approx(lead)
     assert leader_speed(rd + 10.0) == pytest.approx(0.2 * rd * rd / (rd + 10.0))
     assert leader_speed(rd + 10.0) < lead - 1.5
+    # fading back to the lead by 20 m out: a leader flying in from afar keeps it
+    assert leader_speed(rd + 15.0) == pytest.approx(0.5 * (lead + 0.2 * rd * rd / (rd + 15.0)))
+    assert leader_speed(rd + 20.0) == pytest.approx(lead)
+    assert leader_speed(rd + 500.0) == pytest.approx(lead)
 
 
 def test_moving_target_speed_is_relative_to_the_target():
