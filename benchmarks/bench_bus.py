@@ -5,12 +5,18 @@
 One publisher sends N VehicleStatus messages on one topic; one subscriber (another client)
 reads them all. The time runs from the first publish to the last message read, so it covers
 encoding, the transport, validation on receipt and the subscriber's queue.
+
+Then the in-process fan-out, as a team hears each status: N / K statuses to K other clients
+of one broker (``--subscribers K``, 20), with the payload validated once per delivery and the
+frozen message shared (the broker's default) against validated in every client.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import math
 import tempfile
 import time
 from pathlib import Path
@@ -54,12 +60,46 @@ async def _run(url: str | None, n: int) -> tuple[float, int]:
     return elapsed, sub_bus.stats.dropped
 
 
+async def _fan_out(share: bool, n: int, k: int) -> float:
+    """Seconds to deliver ``n`` statuses from one publisher to ``k`` other clients of one
+    in-process broker (as a team of ``k`` agents hears each status), the payload validated
+    once per delivery (``share``) or once per client."""
+    broker = InProcessBroker(share_decoded=share)
+    messages = [_status(i) for i in range(n)]
+    async with contextlib.AsyncExitStack() as stack:
+        subs = []
+        for i in range(k):
+            bus = await stack.enter_async_context(
+                open_bus(None, client_id=f"bench-sub-{i}", queue_size=n, broker=broker)
+            )
+            subs.append(await stack.enter_async_context(bus.subscribe(topics.ALL_STATUS)))
+        pub = await stack.enter_async_context(open_bus(None, client_id="bench-pub", broker=broker))
+        topic = topics.status(0)
+        start = time.perf_counter()
+        for message in messages:
+            await pub.publish(topic, message)
+        for sub in subs:
+            for _ in range(n):
+                await anext(sub)
+        return time.perf_counter() - start
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--messages", type=int, default=20_000)
     parser.add_argument("--broker", help="an MQTT URL; default: start a mosquitto on loopback")
+    parser.add_argument(
+        "--subscribers", type=int, default=20, help="clients of the fan-out comparison (20)"
+    )
     args = parser.parse_args()
     n = args.messages
+    k = args.subscribers
+    fan_n = max(1, n // k)
+    # side by side, alternating, the better of three each: the machine is shared
+    once, each = math.inf, math.inf
+    for _ in range(3):
+        once = min(once, asyncio.run(_fan_out(True, fan_n, k)))
+        each = min(each, asyncio.run(_fan_out(False, fan_n, k)))
 
     inproc_s, _ = asyncio.run(_run(None, n))
     if args.broker:
@@ -80,6 +120,11 @@ def main() -> None:
     print(f"in-process / MQTT throughput ratio: {mqtt_s / inproc_s:.1f}")
     if dropped:
         print(f"(MQTT subscriber queue dropped {dropped})")
+    print(
+        f"in-process fan-out, {fan_n} statuses to {k} clients: validated once per delivery"
+        f" {once * 1e6 / fan_n:7.1f} us/status, once per client {each * 1e6 / fan_n:7.1f}"
+        f" us/status (once / per client {once / each:.2f})"
+    )
 
 
 if __name__ == "__main__":

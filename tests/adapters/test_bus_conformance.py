@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import math
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -423,3 +424,39 @@ async def test_the_birth_is_published_as_the_client_opens(harness: Harness) -> N
 def test_in_process_is_the_default() -> None:
     assert isinstance(open_bus(None), InProcessBus)
     assert isinstance(open_bus(), InProcessBus)
+
+
+async def test_the_in_process_broker_validates_a_payload_once_for_all_its_clients(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # every client of one broker gets the same (frozen) message, validated once; a garbled
+    # payload is still dropped and counted by each client that subscribed to it
+    from app.adapters.bus import codec
+
+    calls: list[bytes] = []
+    real = codec.decode
+
+    def counted(payload: bytes) -> Message:
+        calls.append(bytes(payload))
+        return real(payload)
+
+    monkeypatch.setattr(codec, "decode", counted)
+    for share, decodes in ((True, 1), (False, 3)):
+        calls.clear()
+        broker = InProcessBroker(share_decoded=share)
+        clients = [InProcessBus(broker, client_id=f"c{i}") for i in range(3)]
+        async with contextlib.AsyncExitStack() as stack:
+            subs = []
+            for bus in clients:
+                await stack.enter_async_context(bus)
+                subs.append(await stack.enter_async_context(bus.subscribe(topics.ALL_STATUS)))
+            good = status(2, 1.0)
+            broker.route(topics.status(2).value, encode(good))
+            got = [(await take(sub, 1))[0] for sub in subs]
+            assert [message for _, message in got] == [good] * 3
+            assert (got[0][1] is got[1][1] is got[2][1]) == share
+            assert len(calls) == decodes
+            broker.route(topics.status(2).value, b"{not json")
+            assert [bus.stats.malformed for bus in clients] == [1, 1, 1]
+            assert len(calls) == 2 * decodes
+            assert all(sub.pending() == 0 for sub in subs)

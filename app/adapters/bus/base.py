@@ -121,6 +121,25 @@ class BusClosed(BusError):
     """The bus is not open (not entered yet, or already closed)."""
 
 
+def _decode(
+    payload: bytes, decoded: dict[bytes, Message | codec.MalformedMessage] | None
+) -> Message:
+    """``codec.decode``, through ``decoded`` (see ``Bus._ingest``) where given: a payload met
+    before gives the same message, or raises the same error, without validating it again."""
+    if decoded is None:
+        return codec.decode(payload)
+    known = decoded.get(payload)
+    if known is None:
+        try:
+            known = codec.decode(payload)
+        except codec.MalformedMessage as exc:  # UnsupportedVersion is one too
+            known = exc
+        decoded[payload] = known
+    if isinstance(known, codec.MalformedMessage):
+        raise known
+    return known
+
+
 class Subscription:
     """The messages on one topic filter: enter it, then ``async for topic, message in it``.
 
@@ -352,12 +371,20 @@ class Bus(abc.ABC):
         return False
 
     def _ingest(
-        self, topic_name: str, payload: bytes, filters: Iterable[TopicFilter] | None = None
+        self,
+        topic_name: str,
+        payload: bytes,
+        filters: Iterable[TopicFilter] | None = None,
+        decoded: dict[bytes, Message | codec.MalformedMessage] | None = None,
     ) -> None:
         """Decode a received payload and queue it for the matching subscriptions.
 
         ``filters``, when the transport knows them, are the filters the payload arrived for;
-        otherwise the topic is matched against every subscription. Never raises on bad input.
+        otherwise the topic is matched against every subscription. ``decoded``: what the codec
+        made of payloads already decoded for other clients of one delivery (the in-process
+        broker's), looked up by the payload's bytes after unsealing and filled in here: every
+        client still unseals, refuses and checks freshness for itself, but one payload is
+        validated once, not once per client (messages are frozen). Never raises on bad input.
         """
         if filters is None:
             targets = [f for f in self._subscriptions if f.matches(topic_name)]
@@ -375,7 +402,7 @@ class Bus(abc.ABC):
             payload, counter = opened.payload, opened.counter
         try:
             topic = Topic(topic_name)
-            message = codec.decode(payload)
+            message = _decode(payload, decoded)
         except codec.UnsupportedVersion as exc:
             self._drop(WRONG_VERSION, "?", topic_name, exc)
             return

@@ -13,7 +13,9 @@ import itertools
 import logging
 
 from app.adapters.bus.base import DEFAULT_QUEUE_SIZE, Birth, Bus, Will
+from app.adapters.bus.codec import MalformedMessage
 from app.adapters.bus.signing import MissionKey
+from app.runtime.ports.messages import Message
 from app.runtime.ports.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
@@ -23,9 +25,13 @@ _ids = itertools.count(1)
 class InProcessBroker:
     """Routes payloads between the in-process clients that share it."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, share_decoded: bool = True) -> None:
+        """``share_decoded``: a payload routed to several clients is validated once and the
+        (frozen) message shared (``Bus._ingest``); False validates it in every client, as a
+        broker between processes must (kept for ``benchmarks.bench_bus`` to compare)."""
         self._clients: list[InProcessBus] = []
         self._retained: dict[str, bytes] = {}
+        self._share_decoded = share_decoded
 
     def _join(self, client: InProcessBus) -> None:
         self._clients.append(client)
@@ -42,8 +48,11 @@ class InProcessBroker:
                 self._retained[topic] = payload
             else:
                 self._retained.pop(topic, None)
+        decoded: dict[bytes, Message | MalformedMessage] | None = (
+            {} if self._share_decoded else None
+        )
         for client in list(self._clients):
-            client._ingest(topic, payload)
+            client._ingest(topic, payload, decoded=decoded)
 
     def retained(self, topic_filter: TopicFilter) -> list[tuple[str, bytes]]:
         """The retained payloads on the topics ``topic_filter`` matches."""
