@@ -98,12 +98,15 @@ def _sinc(x: float) -> float:
     return math.sin(x) / x if abs(x) > 1e-8 else 1.0 - x * x / 6.0
 
 
+#: each axis's (p, v, a) rows and columns in the state order [x, vx, y, vy, ax, ay]
+_AXIS_INDEX = tuple(np.ix_(idx, idx) for idx in ((POS[a], VEL[a], ACC[a]) for a in (0, 1)))
+
+
 def _axis_blocks(f3: FloatArray) -> FloatArray:
     """Embed a per-axis (p, v, a) 3x3 matrix into the 6x6 state order [x, vx, y, vy, ax, ay]."""
     out = np.zeros((STATE_DIM, STATE_DIM))
-    for axis in (0, 1):
-        idx = (POS[axis], VEL[axis], ACC[axis])
-        out[np.ix_(idx, idx)] = f3
+    for index in _AXIS_INDEX:
+        out[index] = f3
     return out
 
 

@@ -71,20 +71,26 @@ class TopicFilter:
 
     def matches(self, topic: Topic | str) -> bool:
         """Whether a message published on ``topic`` is delivered to this filter (MQTT 4.7)."""
-        name = topic.value if isinstance(topic, Topic) else topic
-        names = name.split("/")
-        pattern = self.value.split("/")
-        # MQTT 4.7.2: a filter that starts with a wildcard does not match $-topics
-        if name.startswith("$") and pattern[0] in ("+", "#"):
+        return _matches(self.value, topic.value if isinstance(topic, Topic) else topic)
+
+
+@functools.lru_cache(maxsize=4096)
+def _matches(filter_value: str, name: str) -> bool:
+    """``TopicFilter.matches``, remembered: every client matches every payload's topic against
+    each of its filters, and a mission has a few hundred (filter, topic) pairs at most."""
+    names = name.split("/")
+    pattern = filter_value.split("/")
+    # MQTT 4.7.2: a filter that starts with a wildcard does not match $-topics
+    if name.startswith("$") and pattern[0] in ("+", "#"):
+        return False
+    for i, level in enumerate(pattern):
+        if level == "#":
+            return True  # also matches the parent level: "a/#" matches "a"
+        if i >= len(names):
             return False
-        for i, level in enumerate(pattern):
-            if level == "#":
-                return True  # also matches the parent level: "a/#" matches "a"
-            if i >= len(names):
-                return False
-            if level not in ("+", names[i]):
-                return False
-        return len(names) == len(pattern)
+        if level not in ("+", names[i]):
+            return False
+    return len(names) == len(pattern)
 
 
 def as_topic(topic: Topic | str) -> Topic:
