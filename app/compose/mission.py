@@ -28,6 +28,7 @@ from app.compose.parts import (
     bring_up,
     clock_rate,
     gcs_endpoint,
+    gcs_ports,
     ground_station,
     open_links,
     recording_inputs,
@@ -153,11 +154,22 @@ class Mission:
             port = self._simulator.config.base_port
         else:
             port = self._base_port if self._base_port is not None else cfg.sim.base_port
-            if self._base_port is None and not udp_ports_free(port, plan.count):
-                # another simulator or SITL is on the default ports: take free ones
-                port = find_free_udp_base_port(plan.count)
+            taken = gcs_ports(gcs_endpoint(plan), plan.count)
+            clash = taken & set(range(port, port + plan.count))
+            if self._base_port is None and (clash or not udp_ports_free(port, plan.count)):
+                # another simulator or SITL is on the default ports, or the team's ports reach
+                # the ground station's: take free ones
+                while True:
+                    port = find_free_udp_base_port(plan.count)
+                    if not taken & set(range(port, port + plan.count)):
+                        break
+                why = f"the ground station's port {min(clash)} is among them" if clash else "busy"
                 log.warning(
-                    "UDP %d.. busy: the built-in simulator uses %d..", cfg.sim.base_port, port
+                    "UDP %d..%d: %s; the built-in simulator uses %d..",
+                    cfg.sim.base_port,
+                    cfg.sim.base_port + plan.count - 1,
+                    why,
+                    port,
                 )
             await stack.enter_async_context(simulator_process(cfg, plan.count, port, self.out_dir))
         return [f"udpin://127.0.0.1:{port + i}" for i in range(plan.count)]

@@ -99,6 +99,20 @@ def clock_rate(plan: MissionPlan, builtin: bool) -> float:
     return plan.config.sim.speedup if builtin else 1.0
 
 
+def gcs_ports(gcs: UdpEndpoint | None, count: int) -> frozenset[int]:
+    """The UDP ports on this host that the ground-station side of ``count`` vehicles' relays
+    sends to or listens on (``gcs_endpoint``): a ``udpout`` to this host's port, or a
+    ``udpin`` base and the ``count - 1`` above it. A built-in simulator's vehicle on one of them
+    would hear the relays' copies of every vehicle's traffic as its own (at 14540 + i,
+    vehicle 11's port is QGroundControl's 14550)."""
+    if gcs is None:
+        return frozenset()
+    if gcs.mode == "udpin":
+        return frozenset(range(gcs.port, gcs.port + count))
+    local = gcs.host in ("localhost", "0.0.0.0") or gcs.host.startswith("127.")
+    return frozenset({gcs.port}) if local else frozenset()
+
+
 def gcs_endpoint(plan: MissionPlan) -> UdpEndpoint | None:
     """Where a ground station beside the app sees the vehicles (``[link] gcs_forward``; None:
     nowhere)."""

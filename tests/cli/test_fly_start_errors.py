@@ -72,3 +72,43 @@ def test_fly_names_the_vehicle_port_that_is_taken(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert f"UDP 127.0.0.1:{port}" in err[0]
+
+
+def test_the_ground_stations_port_is_never_a_simulated_vehicles(tmp_path, monkeypatch, caplog):
+    # at 14540 + i, vehicle 11's port is QGroundControl's 14550, where every relay sends its
+    # copies of every vehicle's traffic: that vehicle heard the whole team as itself and its
+    # arming timed out; the simulator now takes other ports
+    from contextlib import AsyncExitStack, asynccontextmanager
+
+    from app.adapters.vehicle.mavsdk.urls import UdpEndpoint
+    from app.compose import mission as mission_module
+    from app.compose.parts import gcs_ports
+
+    assert gcs_ports(UdpEndpoint("udpout", "127.0.0.1", 14550), 20) == {14550}
+    assert gcs_ports(UdpEndpoint("udpout", "10.0.0.5", 14550), 20) == set()
+    assert gcs_ports(UdpEndpoint("udpin", "0.0.0.0", 14600), 3) == {14600, 14601, 14602}
+    assert gcs_ports(None, 3) == set()
+
+    started: list[int] = []
+
+    @asynccontextmanager
+    async def fake_simulator(config, vehicles, base_port, workdir):
+        started.append(base_port)
+        yield None
+
+    monkeypatch.setattr(mission_module, "simulator_process", fake_simulator)
+    config = load_config("test-short", MissionConfig)
+    assert config.link.gcs_forward == "udpout:127.0.0.1:14550"
+    assert config.sim.base_port == 14540
+
+    async def urls(vehicles: int) -> list[str]:
+        plan = build_plan(config, vehicles=vehicles)
+        async with AsyncExitStack() as stack:
+            return await mission_module.Mission(plan, tmp_path)._vehicle_urls(stack)
+
+    team = asyncio.run(urls(12))
+    ports = [int(url.rsplit(":", 1)[1]) for url in team]
+    assert len(ports) == 12
+    assert ports == list(range(started[0], started[0] + 12))
+    assert 14550 not in ports
+    assert "the ground station's port 14550 is among them" in caplog.text
