@@ -235,8 +235,8 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
         if gout.mission is not None:
             inputs.append(logic.HeardMission(gout.mission.stage, gout.mission.active, t))
         for i in range(n):
-            fixes = [logic.HeardTeammate(j, _fix(s)) for j, s in statuses if j != i]
-            for event in (*inputs, *fixes):
+            fixes = logic.HeardTeammates(tuple((j, _fix(s)) for j, s in statuses if j != i))
+            for event in (*inputs, fixes):
                 states[i], _ = logic.step(states[i], event, agents[i])
         if setup.truth_fed:
             exact = _truth_estimate(t, path.state_at(t))

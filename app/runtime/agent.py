@@ -14,7 +14,8 @@ RTL, a failsafe) is left in that mode; the agent sends it nothing, reports it (t
 it back only on an explicit ``resume`` command.
 
 Only the newest fused estimate is applied: its subscription holds one message, so one that
-arrives while an older one waits replaces it (``FUSED_QUEUE``).
+arrives while an older one waits replaces it (``FUSED_QUEUE``). The teammates' statuses are
+taken once per control tick, all those that came since the last in one step (``TEAM_QUEUE``).
 """
 
 import asyncio
@@ -65,6 +66,10 @@ filter's information allocation) replays the local filter's observations made si
 about 1 ms each, so a late one costs several times a control tick; an agent that applied every
 one in turn on a loaded machine fell ever further behind (measured: 20 ms per fused estimate,
 the agent's messages 18-41 s late), while the newest makes every older one redundant."""
+
+TEAM_QUEUE = 1024
+"""Teammates' statuses kept unread between two control ticks: a team of fifty at 10 Hz for two
+seconds of ticks lost (the oldest go first: only each teammate's newest few are of use)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,6 +141,8 @@ class AgentCounters:
     fixes_rate_limited: int = 0  # camera fixes over the link's rate limit, dropped
     ground_silent_holds: int = 0  # holds because the ground station went silent
     fused_unread: int = 0  # fused estimates pushed out unread by a newer one (one-deep queue)
+    #: teammates' statuses pushed out unread by newer ones (no control tick took them)
+    statuses_unread: int = 0
     cpu_s: float = 0.0  # CPU (this thread's) spent in the agent's own work: every mission step
     wall_s: float = 0.0  # wall time the agent ran
     #: ``cpu_s`` per second of vehicle time: the share of one core the agent's work takes at
@@ -240,6 +247,7 @@ class VehicleAgent:
         self._fixes = _FixBucket(runtime.max_fix_rate_hz, runtime.fix_burst)
         self._faults: dict[str, int] = {}
         self._started: float | None = None  # monotonic time ``run`` began
+        self._team: Subscription | None = None  # the teammates' statuses, while running
 
     @property
     def pilot_has_control(self) -> bool:
@@ -285,9 +293,10 @@ class VehicleAgent:
             self._bus.subscribe(topics.observation(v)) as observations,
             self._bus.subscribe(topics.GLOBAL_ESTIMATE, queue_size=FUSED_QUEUE) as fused,
             self._bus.subscribe(topics.MISSION) as mission,
-            self._bus.subscribe(topics.ALL_STATUS) as statuses,
+            self._bus.subscribe(topics.ALL_STATUS, queue_size=TEAM_QUEUE) as statuses,
             self._bus.subscribe(topics.ALL_COMMANDS) as commands,
         ):
+            self._team = statuses  # taken once per control tick (``_hear_team``)
             try:
                 async with asyncio.TaskGroup() as tg:
                     tg.create_task(self._control(), name=f"{self.name}-control")
@@ -296,11 +305,12 @@ class VehicleAgent:
                     tg.create_task(self._hear(observations), name=f"{self.name}-observations")
                     tg.create_task(self._hear(fused), name=f"{self.name}-fused")
                     tg.create_task(self._hear(mission), name=f"{self.name}-mission")
-                    tg.create_task(self._hear(statuses), name=f"{self.name}-team")
                     tg.create_task(self._hear(commands), name=f"{self.name}-commands")
             finally:
                 # every fused estimate is either applied, refused (messages_refused) or this
                 self.counters.fused_unread = fused.dropped
+                self.counters.statuses_unread = statuses.dropped
+                self._team = None
 
     # --- the control path -----------------------------------------------------------------
 
@@ -348,6 +358,7 @@ class VehicleAgent:
             self._level_up(frame),
         )
         self._frame_wait(frame)
+        self._hear_team()
         try:
             self.state, out = self._step(logic.Control(t, own), self.params)
         except ValueError as exc:  # a non-finite frame: never steer on it
@@ -662,19 +673,6 @@ class VehicleAgent:
                         vehicle=self.params.vehicle,
                         stage=out.stage.value,
                     )
-            case bus.VehicleStatus() if message.vehicle != self.params.vehicle:
-                fix = logic.TeammateFix(
-                    message.t_s,
-                    message.east_m,
-                    message.north_m,
-                    message.course_rad,
-                    message.speed_m_s,
-                    message.up_m,
-                    message.climb_m_s,
-                    message.level_up_m,
-                )
-                teammate = logic.HeardTeammate(message.vehicle, fix)
-                self.state, out = self._step(teammate, self.params)
             case bus.Command() if (
                 message.vehicles is None or self.params.vehicle in message.vehicles
             ):
@@ -690,6 +688,50 @@ class VehicleAgent:
                 "message_refused",
                 self._last_t,
                 f"{type(message).__name__} from {message.sender}: {out.refused}",
+            )
+
+    def _hear_team(self) -> None:
+        """The teammates' statuses that came since the last tick, in one step: hearing each
+        as it came woke the agent and stepped its state once per status, which for a team
+        of n is n^2 wake-ups and steps per status period over the process."""
+        if self._team is None:
+            return
+        fixes: list[tuple[int, logic.TeammateFix]] = []
+        senders: dict[int, str] = {}
+        for _topic, message in self._team.drain():
+            if not isinstance(message, bus.VehicleStatus) or message.vehicle == self.params.vehicle:
+                continue
+            senders[message.vehicle] = message.sender
+            fixes.append(
+                (
+                    message.vehicle,
+                    logic.TeammateFix(
+                        message.t_s,
+                        message.east_m,
+                        message.north_m,
+                        message.course_rad,
+                        message.speed_m_s,
+                        message.up_m,
+                        message.climb_m_s,
+                        message.level_up_m,
+                    ),
+                )
+            )
+        if not fixes:
+            return
+        try:
+            self.state, out = self._step(logic.HeardTeammates(tuple(fixes)), self.params)
+        except Exception as exc:  # one bad batch never ends the agent: counted, logged
+            self.counters.message_errors += 1
+            self._fault("message_failed", self._last_t, exc)
+            return
+        for vehicle, why in out.refused_teammates:
+            self.counters.messages_refused += 1
+            if not self._link.link_ok:
+                self.counters.refused_while_silent += 1
+                continue
+            self._fault(
+                "message_refused", self._last_t, f"VehicleStatus from {senders[vehicle]}: {why}"
             )
 
     async def _obey(self, message: bus.Command) -> None:

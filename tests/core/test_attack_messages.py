@@ -207,8 +207,9 @@ def test_messages_from_the_future_are_refused_by_the_agent() -> None:
     assert out.refused
     assert state2.stage == state.stage
     fix = agent_logic.TeammateFix(t + 100.0, 0.0, 0.0, 0.0, 14.0)
-    state2, out = agent_logic.step(state, agent_logic.HeardTeammate(1, fix), p)
+    state2, out = agent_logic.step(state, agent_logic.HeardTeammates(((1, fix),)), p)
     assert out.refused
+    assert [v for v, _ in out.refused_teammates] == [1]
     assert state2.teammates == state.teammates
 
 

@@ -19,6 +19,7 @@ from app.core.mission.agent import (
     hear_fused,
     hear_mission,
     hear_teammate,
+    hear_teammates,
     initial_agent_state,
     observe,
     target_at,
@@ -146,6 +147,27 @@ def test_stale_messages_do_not_replace_newer_ones():
     state = hear_teammate(state, 1, TeammateFix(5.0, 1.0, 2.0, 0.0, 14.0))
     older = hear_teammate(state, 1, TeammateFix(4.0, 7.0, 7.0, 0.0, 14.0))
     assert dict(older.teammates)[1].t_s == 5.0
+
+
+def test_a_ticks_statuses_heard_at_once_leave_the_state_they_leave_heard_one_by_one():
+    p = params(0)
+    state = hear_mission(initial_agent_state(p), "gather", (0, 1, 2))
+    state = replace(state, join_since_t_s=4.5)
+    fixes = [
+        (1, TeammateFix(4.0, 1.0, 2.0, 0.0, 14.0)),
+        (2, TeammateFix(4.6, 3.0, 4.0, 0.1, 15.0)),
+        (1, TeammateFix(5.0, 1.5, 2.0, 0.0, 14.0)),
+        (2, TeammateFix(4.5, 9.0, 9.0, 0.0, 14.0)),  # older than the one held: not kept
+        (1, TeammateFix(5.1, 2.0, 2.0, 0.0, 14.0)),
+    ]
+    one_by_one = state
+    for vehicle, fix in fixes:
+        one_by_one = hear_teammate(one_by_one, vehicle, fix)
+    at_once = hear_teammates(state, fixes)
+    assert at_once == one_by_one
+    assert dict(at_once.teammates)[2].east_m == 3.0
+    assert [(v, f.t_s) for v, f in at_once.join_fixes] == [(1, 5.0), (2, 4.6)]
+    assert hear_teammates(state, []) is state
 
 
 def test_feedback_moves_the_local_filter_onto_the_fused_estimate():

@@ -234,7 +234,7 @@ def _plan_from(mission_t_s, monkeypatch, statuses_first=()):
                 state, _ = logic.step(state, logic.Telemetry(30.05, status), p)
             else:
                 fix = logic.TeammateFix(30.05, east, 117.7, course, speed)
-                state, _ = logic.step(state, logic.HeardTeammate(q.vehicle, fix), p)
+                state, _ = logic.step(state, logic.HeardTeammates(((q.vehicle, fix),)), p)
         if i in statuses_first:
             state, _ = logic.step(state, gather, p)
         now = 0.5 * math.pi - math.radians(182.0)

@@ -17,11 +17,13 @@ from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core.estimation.messages import GlobalEstimate
+from app.core.mission import agent as agent_logic
 from app.runtime.agent import VehicleAgent
+from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.ports.vehicle import TargetObservation
 from app.runtime.wire import global_to_bus
-from tests.support.fake_link import QueueLink
+from tests.support.fake_link import QueueLink, frame
 
 WAIT_S = 5.0
 
@@ -111,3 +113,61 @@ async def test_observations_that_queued_while_the_agent_was_busy_are_merged():
         assert estimate is not None
         assert abs(estimate.x[0] - 7.0 * estimate.t_s) < 1.5
         running.cancel()
+
+
+async def test_teammates_statuses_are_taken_once_per_control_tick_in_one_step(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Statuses wait on the bus until the agent's next control tick, which takes them all in one
+    step, in the order they came (each teammate's newest kept): a team of n then costs each
+    agent one step per tick instead of one per status, n^2 over the process."""
+    plan = build_plan(load_config("test-short", MissionConfig))
+    broker = InProcessBroker()
+    link = QueueLink()
+    batches: list[tuple[int, ...]] = []
+    step = agent_logic.step
+
+    def counted(
+        state: agent_logic.MissionAgentState,
+        event: agent_logic.AgentInput,
+        params: agent_logic.MissionAgentParams,
+    ) -> tuple[agent_logic.MissionAgentState, agent_logic.AgentOutbox]:
+        if isinstance(event, agent_logic.HeardTeammates):
+            batches.append(tuple(v for v, _ in event.fixes))
+        return step(state, event, params)
+
+    monkeypatch.setattr(agent_logic, "step", counted)
+
+    def status(vehicle: int, t_s: float, east_m: float) -> bus.VehicleStatus:
+        return bus.VehicleStatus(
+            sender=f"agent-{vehicle + 1}", t_s=t_s, vehicle=vehicle, east_m=east_m,
+            north_m=0.0, alt_m=100.0, course_rad=0.0, speed_m_s=14.0, phase_rad=0.0,
+            stage="gather", link="ok", healthy=True,
+        )  # fmt: skip
+
+    async with (
+        InProcessBus(broker, client_id="agent-1") as agent_bus,
+        InProcessBus(broker, client_id="agent-2") as second,
+        InProcessBus(broker, client_id="agent-3") as third,
+    ):
+        agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
+        async with asyncio.TaskGroup() as tg:
+            task = tg.create_task(agent.run())
+            await asyncio.sleep(0.01)
+            link.put(frame(1.0, 90.0, 0.0))
+            await until(lambda: agent.counters.ticks == 1)
+            await second.publish(topics.status(1), status(1, 0.9, 10.0))
+            await third.publish(topics.status(2), status(2, 0.95, 20.0))
+            await second.publish(topics.status(1), status(1, 1.0, 11.0))
+            await agent_bus.publish(topics.status(0), status(0, 1.0, 90.0))  # its own: not kept
+            await asyncio.sleep(0.05)
+            assert agent.state.teammates == ()  # heard, waiting for the tick
+            link.put(frame(1.1, 91.4, 0.0))
+            await until(lambda: agent.counters.ticks == 2)
+            task.cancel()
+    assert batches == [(1, 2, 1)]
+    held = dict(agent.state.teammates)
+    assert sorted(held) == [1, 2]
+    assert (held[1].t_s, held[1].east_m) == (1.0, 11.0)
+    assert held[2].east_m == 20.0
+    assert agent.counters.messages_refused == 0

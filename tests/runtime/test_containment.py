@@ -201,7 +201,8 @@ async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_with
 ) -> None:
     """The agent's clock is its vehicle's: once the vehicle is silent every teammate's status is
     stamped ahead of it and refused. Counted apart, not logged one by one (a killed PX4 left
-    2,000 such warnings in the log); while the link is up the same refusal is logged."""
+    2,000 such warnings in the log); while the link is up the same refusal is logged. (The
+    statuses are taken at the control ticks: those of the silence, at the next frame.)"""
     plan = build_plan(load_config("test-short", MissionConfig))
     broker = InProcessBroker()
     link = QueueLink()
@@ -216,12 +217,14 @@ async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_with
             link.put(frame(1.0, 90.0, 0.0))
             await until(lambda: agent.counters.ticks == 1)
             await teammate.publish(topics.status(1), status(60.0, vehicle=1))
+            link.put(frame(1.1, 90.0, 0.0))
             await until(lambda: agent.counters.messages_refused == 1)
             assert "message_refused" in caplog.text
             caplog.clear()
             link.link_ok = False
             for k in range(5):
                 await teammate.publish(topics.status(1), status(61.0 + k, vehicle=1))
+            link.put(frame(1.2, 90.0, 0.0))
             await until(lambda: agent.counters.messages_refused == 6)
             task.cancel()
     assert agent.counters.refused_while_silent == 5

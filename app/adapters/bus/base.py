@@ -202,6 +202,16 @@ class Subscription:
         """How many messages are queued, unread."""
         return len(self._queue)
 
+    def drain(self) -> list[tuple[Topic, Message]]:
+        """Every message queued, oldest first, without waiting: for a reader that takes a
+        topic's messages at its own pace (an agent takes its teammates' statuses once per
+        control tick) instead of waking for each."""
+        if self._state == "new":
+            raise BusError(f"enter {self!r} with 'async with' before reading it")
+        taken = list(self._queue)
+        self._queue.clear()
+        return taken
+
     # called by the bus
     def _offer(self, topic: Topic, message: Message) -> bool:
         """Queue a message; return False when it pushed out the oldest one."""

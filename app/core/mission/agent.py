@@ -6,7 +6,7 @@ these functions:
 - ``observe``: a target observation into the vehicle's local IMM-UKF (Appendix B).
 - ``hear_fused``: the main filter's fused estimate, with the federated information feedback
   (Appendix A) applied to the local filter.
-- ``hear_mission`` / ``hear_teammate``: the ground station's stage and active team, and the
+- ``hear_mission`` / ``hear_teammate(s)``: the ground station's stage and active team, and the
   teammates' positions, for phase keeping.
 - ``control``: one tick on the vehicle's own telemetry: the target as best known (the fused
   estimate, else the local one, predicted to the tick's time), the active team, and
@@ -31,6 +31,7 @@ state (``MissionAgentState.estimates``, ``.statuses``).
 """
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -484,13 +485,23 @@ def hear_mission(
 
 def hear_teammate(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
     """A teammate's newest position (older fixes than the one held are ignored)."""
-    state = _join_fix(state, vehicle, fix)
+    return hear_teammates(state, ((vehicle, fix),))
+
+
+def hear_teammates(
+    state: MissionAgentState, fixes: Iterable[tuple[int, TeammateFix]]
+) -> MissionAgentState:
+    """Teammates' positions in the order heard, as ``hear_teammate`` one after another, in one
+    update of the state: a team's statuses cost one step per control tick, not one each."""
     held = dict(state.teammates)
-    old = held.get(vehicle)
-    if old is not None and fix.t_s < old.t_s:
-        return state
-    held[vehicle] = fix
-    return replace(state, teammates=tuple(sorted(held.items())))
+    changed = False
+    for vehicle, fix in fixes:
+        state = _join_fix(state, vehicle, fix)
+        old = held.get(vehicle)
+        if old is None or fix.t_s >= old.t_s:
+            held[vehicle] = fix
+            changed = True
+    return replace(state, teammates=tuple(sorted(held.items()))) if changed else state
 
 
 def _join_fix(state: MissionAgentState, vehicle: int, fix: TeammateFix) -> MissionAgentState:
@@ -1366,9 +1377,11 @@ class HeardMission:
 
 
 @dataclass(frozen=True, slots=True)
-class HeardTeammate:
-    vehicle: int
-    fix: TeammateFix
+class HeardTeammates:
+    """Teammates' statuses, (vehicle, fix) in the order heard: those that came since the last
+    control tick."""
+
+    fixes: tuple[tuple[int, TeammateFix], ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -1378,7 +1391,7 @@ class Hold:
     holding: bool
 
 
-AgentInput = Observed | Telemetry | Control | HeardFused | HeardMission | HeardTeammate | Hold
+AgentInput = Observed | Telemetry | Control | HeardFused | HeardMission | HeardTeammates | Hold
 
 
 @dataclass(frozen=True, slots=True)
@@ -1386,7 +1399,8 @@ class AgentOutbox:
     """What one step wants sent or recorded: the vehicle ``command`` (None while holding), the
     local ``estimate`` to publish, the vehicle's ``status``, the observation's ``report``
     (used, or why not), the ``stage`` when the step changed it, events, and ``refused``: why
-    a message heard was not believed (empty: it was, or there was none)."""
+    a message heard was not believed (empty: it was, or there was none); of teammates'
+    statuses, ``refused_teammates`` says whose and why, one entry for each refused."""
 
     command: Command | None = None
     estimate: LocalEstimate | None = None
@@ -1395,6 +1409,7 @@ class AgentOutbox:
     stage: Stage | None = None
     events: tuple[AgentEvent, ...] = ()
     refused: str = ""
+    refused_teammates: tuple[tuple[int, str], ...] = ()
 
 
 _EMPTY = AgentOutbox()
@@ -1448,11 +1463,19 @@ def step(
             if t is not None and state.stage == Stage.GATHER and started:
                 state = _join_started(state, t)
             return state, AgentOutbox(stage=state.stage) if state.stage != before else _EMPTY
-        case HeardTeammate(vehicle, fix):
-            refused = ahead_of_clock(state, fix.t_s, params)
-            if refused:
-                return state, AgentOutbox(refused=refused)
-            return hear_teammate(state, vehicle, fix), _EMPTY
+        case HeardTeammates(fixes):
+            believed: list[tuple[int, TeammateFix]] = []
+            refusals: list[tuple[int, str]] = []
+            for vehicle, fix in fixes:
+                why = ahead_of_clock(state, fix.t_s, params)
+                if why:
+                    refusals.append((vehicle, why))
+                else:
+                    believed.append((vehicle, fix))
+            state = hear_teammates(state, believed)
+            if not refusals:
+                return state, _EMPTY
+            return state, AgentOutbox(refused=refusals[0][1], refused_teammates=tuple(refusals))
         case Hold(holding):
             return set_holding(state, holding), _EMPTY
 

@@ -30,6 +30,10 @@ class Subscription(Protocol):
 
     async def __anext__(self) -> tuple[Topic, Message]: ...
 
+    def drain(self) -> list[tuple[Topic, Message]]:
+        """Every message queued, oldest first, without waiting."""
+        ...
+
 
 class Bus(Protocol):
     """One bus client: publish a message on a topic; subscribe to a topic filter."""
