@@ -9,7 +9,15 @@ interpreter (and its lock) and a high speed-up stays faithful on two cores::
 
 MISSION.json is a validated mission config (``MissionConfig``) as JSON; the simulator is the one
 ``app.config.plan.sim_config`` builds from it. It prints its endpoints and ``running`` once
-the vehicles are up, and stops on SIGINT or SIGTERM.
+the vehicles are up, and stops on SIGINT or SIGTERM; with ``--parent-pipe`` also when its
+standard input closes.
+
+``standoff fly`` starts it in a session of its own, so that a Ctrl-C in the terminal (which
+signals the whole foreground process group) reaches the mission alone: the mission puts every
+vehicle in hold and only then stops the simulator. Before, the simulator stopped at the same
+moment, and with twenty vehicles every hold on exit after the first timed out on a silent
+link. Its standard input is a pipe from the mission, which closes however the mission ends:
+a mission killed outright (SIGKILL) leaves no simulator behind.
 """
 
 import argparse
@@ -33,11 +41,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("config", type=Path)
     parser.add_argument("--base-port", type=int, required=True)
     parser.add_argument("--vehicles", type=int)
+    parser.add_argument(
+        "--parent-pipe",
+        action="store_true",
+        help="stop when standard input closes (the process that started it has gone)",
+    )
     args = parser.parse_args(argv)
     config = MissionConfig.model_validate_json(args.config.read_text(encoding="utf-8"))
     try:
         plan = build_plan(config, args.vehicles)
-        return asyncio.run(serve(sim_config(plan, args.base_port), None, sys.stdout))
+        config_sim = sim_config(plan, args.base_port)
+        return asyncio.run(serve(config_sim, None, sys.stdout, stop_on_eof=args.parent_pipe))
     except StandoffError as exc:  # the reason, as the last line of simulator.log
         print(f"error: {exc}", file=sys.stderr, flush=True)
         return 2
@@ -61,8 +75,11 @@ async def simulator_process(
         str(base_port),
         "--vehicles",
         str(vehicles),
+        "--parent-pipe",
+        stdin=asyncio.subprocess.PIPE,
         stdout=asyncio.subprocess.PIPE,
         stderr=log_file,
+        start_new_session=True,
     )
     try:
         assert proc.stdout is not None
@@ -90,6 +107,8 @@ async def simulator_process(
             except TimeoutError:
                 proc.kill()
                 await proc.wait()
+        if proc.stdin is not None:
+            proc.stdin.close()
         log_file.close()
         with contextlib.suppress(OSError):
             path.unlink()
@@ -107,13 +126,29 @@ def failure_reason(log_path: Path, exit_code: int | None) -> str:
     return f"it exited with code {exit_code} and wrote nothing to {log_path}"
 
 
-async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int:
-    """Run the simulator, print its endpoints, stop on SIGINT/SIGTERM or after ``duration_s``."""
+class _EndOfInput(asyncio.Protocol):
+    """Sets ``stop`` when the pipe it reads closes; what comes through it is ignored."""
+
+    def __init__(self, stop: asyncio.Event) -> None:
+        self._stop = stop
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._stop.set()
+
+
+async def serve(
+    config: SimConfig, duration_s: float | None, out: TextIO, *, stop_on_eof: bool = False
+) -> int:
+    """Run the simulator, print its endpoints, stop on SIGINT/SIGTERM or after ``duration_s``
+    (and, with ``stop_on_eof``, when standard input closes)."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
+    watch: asyncio.BaseTransport | None = None
+    if stop_on_eof:
+        watch, _ = await loop.connect_read_pipe(lambda: _EndOfInput(stop), sys.stdin)
     try:
         async with SimulatorServer(config) as sim:
             _print_endpoints(sim, out)
@@ -137,6 +172,8 @@ async def serve(config: SimConfig, duration_s: float | None, out: TextIO) -> int
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.remove_signal_handler(sig)
+        if watch is not None:
+            watch.close()
     return 0
 
 
