@@ -166,7 +166,7 @@ async def test_teammates_statuses_are_taken_once_per_control_tick_in_one_step(
             await until(lambda: agent.counters.ticks == 2)
             task.cancel()
     assert batches == [(1, 2, 1)]
-    held = dict(agent.state.teammates)
+    held: dict[int, agent_logic.TeammateFix] = dict(agent.state.teammates)
     assert sorted(held) == [1, 2]
     assert (held[1].t_s, held[1].east_m) == (1.0, 11.0)
     assert held[2].east_m == 20.0
