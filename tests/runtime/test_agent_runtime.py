@@ -7,7 +7,8 @@ telemetry) and the in-process bus.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+import contextlib
+from collections.abc import AsyncIterator, Callable
 
 import numpy as np
 import pytest
@@ -41,6 +42,19 @@ async def until(predicate: Callable[[], bool]) -> None:
     async with asyncio.timeout(WAIT_S):
         while not predicate():  # noqa: ASYNC110
             await asyncio.sleep(0.001)
+
+
+@contextlib.asynccontextmanager
+async def ticking(agent: VehicleAgent, link: QueueLink) -> AsyncIterator[None]:
+    """``agent`` running, its first control tick taken (a frame at 1 s, 90 m east); stopped on
+    the way out."""
+    async with asyncio.TaskGroup() as tg:
+        task = tg.create_task(agent.run())
+        await asyncio.sleep(0.01)
+        link.put(frame(1.0, 90.0, 0.0))
+        await until(lambda: agent.counters.ticks == 1)
+        yield
+        task.cancel()
 
 
 @pytest.mark.parametrize("queued", [1, 5])
@@ -151,11 +165,7 @@ async def test_teammates_statuses_are_taken_once_per_control_tick_in_one_step(
         InProcessBus(broker, client_id="agent-3") as third,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
-        async with asyncio.TaskGroup() as tg:
-            task = tg.create_task(agent.run())
-            await asyncio.sleep(0.01)
-            link.put(frame(1.0, 90.0, 0.0))
-            await until(lambda: agent.counters.ticks == 1)
+        async with ticking(agent, link):
             await second.publish(topics.status(1), status(1, 0.9, 10.0))
             await third.publish(topics.status(2), status(2, 0.95, 20.0))
             await second.publish(topics.status(1), status(1, 1.0, 11.0))
@@ -164,7 +174,6 @@ async def test_teammates_statuses_are_taken_once_per_control_tick_in_one_step(
             assert agent.state.teammates == ()  # heard, waiting for the tick
             link.put(frame(1.1, 91.4, 0.0))
             await until(lambda: agent.counters.ticks == 2)
-            task.cancel()
     assert batches == [(1, 2, 1)]
     held: dict[int, agent_logic.TeammateFix] = dict(agent.state.teammates)
     assert sorted(held) == [1, 2]

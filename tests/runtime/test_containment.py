@@ -21,7 +21,7 @@ from app.runtime.ports import messages as bus
 from app.runtime.ports import topics
 from app.runtime.vehicle import hold_all
 from app.runtime.wire import local_to_core
-from tests.runtime.test_agent_runtime import Events, until
+from tests.runtime.test_agent_runtime import Events, ticking, until
 from tests.support.fake_link import QueueLink, frame
 
 EYE = tuple(tuple(1.0 if i == j else 0.0 for j in range(6)) for i in range(6))
@@ -174,11 +174,7 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
         InProcessBus(broker, client_id="ground") as ground,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
-        async with asyncio.TaskGroup() as tg:
-            task = tg.create_task(agent.run())
-            await asyncio.sleep(0.01)
-            link.put(frame(1.0, 90.0, 0.0))
-            await until(lambda: agent.counters.ticks == 1)
+        async with ticking(agent, link):
             bomb = bus.GlobalEstimate(
                 sender="ground", t_s=1.0, x=(1e200, 0.0, 0.0, 0.0, 0.0, 0.0), P=EYE, beta={}
             )
@@ -189,7 +185,6 @@ async def test_the_agent_counts_a_fused_estimate_it_does_not_believe_and_flies_o
             await until(lambda: agent.counters.messages_refused == 2)
             link.put(frame(1.1, 91.4, 0.0))
             await until(lambda: agent.counters.ticks == 2)
-            task.cancel()
     assert agent.state.fused is None
     assert link.sent == 2
     assert all(math.isfinite(c.course_rad) for c in link.commands)
@@ -211,11 +206,7 @@ async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_with
         InProcessBus(broker, client_id="agent-2") as teammate,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
-        async with asyncio.TaskGroup() as tg:
-            task = tg.create_task(agent.run())
-            await asyncio.sleep(0.01)
-            link.put(frame(1.0, 90.0, 0.0))
-            await until(lambda: agent.counters.ticks == 1)
+        async with ticking(agent, link):
             await teammate.publish(topics.status(1), status(60.0, vehicle=1))
             link.put(frame(1.1, 90.0, 0.0))
             await until(lambda: agent.counters.messages_refused == 1)
@@ -226,7 +217,6 @@ async def test_an_agent_whose_vehicle_fell_silent_counts_teammates_statuses_with
                 await teammate.publish(topics.status(1), status(61.0 + k, vehicle=1))
             link.put(frame(1.2, 90.0, 0.0))
             await until(lambda: agent.counters.messages_refused == 6)
-            task.cancel()
     assert agent.counters.refused_while_silent == 5
     assert "message_refused" not in caplog.text
 
@@ -243,11 +233,7 @@ async def test_every_fused_estimate_is_refused_or_counted_unread() -> None:
         InProcessBus(broker, client_id="ground") as ground,
     ):
         agent = VehicleAgent(plan.agents[0], link, agent_bus, Events())
-        async with asyncio.TaskGroup() as tg:
-            task = tg.create_task(agent.run())
-            await asyncio.sleep(0.01)
-            link.put(frame(1.0, 90.0, 0.0))
-            await until(lambda: agent.counters.ticks == 1)
+        async with ticking(agent, link):
             bomb = bus.GlobalEstimate(
                 sender="ground", t_s=1.0, x=(1e200, 0.0, 0.0, 0.0, 0.0, 0.0), P=EYE, beta={}
             )
@@ -256,7 +242,6 @@ async def test_every_fused_estimate_is_refused_or_counted_unread() -> None:
             )
             await until(lambda: agent.counters.messages_refused >= 1)
             await asyncio.sleep(0.05)
-            task.cancel()
     assert agent.counters.fused_unread > 0
     assert agent.counters.messages_refused + agent.counters.fused_unread == burst
     assert agent.state.fused is None
