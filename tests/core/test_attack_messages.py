@@ -86,6 +86,23 @@ def test_a_one_model_local_estimate_is_refused_and_the_fusion_goes_on() -> None:
     assert abs(state.fused.x[0]) < 1.0
 
 
+def test_a_diverged_local_estimate_is_refused_and_the_others_are_still_taken() -> None:
+    """An agent's track that ran away (seen in a run of twenty: its filter coasted to 1e36 m
+    with a covariance to match, which the outlier gate let through, and the fused estimate
+    went with it, after which every healthy agent's estimate was refused as an outlier)."""
+    state = ground_run(ground_logic.initial_ground_state(), 0.0, 6.0)
+    runaway = replace(local(0, 6.05), x=np.full(6, 1e36), p=np.eye(6) * 1e74)
+    lost = replace(local(0, 6.06), p=np.eye(6) * 1e12)  # a sane state, no information
+    for estimate in (runaway, lost):
+        state, out = ground_logic.step(state, HeardLocal(estimate, estimate.t_s), GROUND)
+        assert out.refused
+    assert state.locals_refused == 2
+    state = ground_run(state, 6.1, 8.0)
+    assert state.fused is not None
+    assert abs(state.fused.x[0]) < 1.0
+    assert state.locals_refused == 2  # the healthy ones after it are taken
+
+
 def test_a_local_estimate_500_m_off_is_an_outlier_and_does_not_move_the_fusion() -> None:
     state = ground_run(ground_logic.initial_ground_state(), 0.0, 6.0)
     for k in range(50):

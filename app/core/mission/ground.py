@@ -75,7 +75,12 @@ class GroundParams:
     position the fused estimate (predicted to its time) finds further off than
     ``local_gate_nis`` (position NIS over the sum of both covariances) is refused as an
     outlier while the fusion is live (some estimate taken within ``coast_after_s``), as is one
-    of the wrong shape (per-model moments that are not the main filter's models)."""
+    of the wrong shape (per-model moments that are not the main filter's models). So is a
+    diverged filter's: a state beyond ``max_abs_state`` (m, m/s, m/s^2), or, while the fusion
+    is live, a position covariance more than ``max_uncertainty_ratio`` times the fused one's.
+    The outlier gate alone lets such an estimate through (its covariance swallows any
+    distance), and one did: an agent whose track had run away to 1e36 m took the fused
+    estimate with it, and then every other agent's estimate was refused as an outlier."""
 
     vehicles: tuple[int, ...]
     radius_m: float
@@ -91,9 +96,17 @@ class GroundParams:
     max_ahead_s: float = 2.0
     max_behind_s: float = 30.0
     local_gate_nis: float = 50.0
+    max_abs_state: float = 1.0e6
+    max_uncertainty_ratio: float = 1.0e4
 
     def __post_init__(self) -> None:
-        for name in ("max_ahead_s", "max_behind_s", "local_gate_nis"):
+        for name in (
+            "max_ahead_s",
+            "max_behind_s",
+            "local_gate_nis",
+            "max_abs_state",
+            "max_uncertainty_ratio",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -215,6 +228,8 @@ def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParam
         or not (np.all(np.isfinite(x)) and np.all(np.isfinite(p)))
     ):
         return "state or covariance of the wrong shape or non-finite"
+    if not np.all(np.abs(x) <= params.max_abs_state):
+        return f"state beyond {params.max_abs_state:g}: a diverged track"
     moments = (estimate.mu, estimate.model_x, estimate.model_p)
     models = params.main.imm.models if params.main.imm is not None else None
     if any(m is not None and np.size(m) > 0 for m in moments):
@@ -233,6 +248,11 @@ def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParam
     f = model.transition(dt)
     xf, pf = f @ fused.x, f @ fused.p @ f.T + model.process_noise(abs(dt))
     pos = np.ix_((0, 2), (0, 2))
+    if not np.trace(p[pos]) <= params.max_uncertainty_ratio * np.trace(pf[pos]):
+        return (
+            f"position covariance over {params.max_uncertainty_ratio:g} times the fused "
+            "estimate's: a lost track"
+        )
     d = np.array([x[0] - xf[0], x[2] - xf[2]])
     s = pf[pos] + p[pos]
     try:
