@@ -2,6 +2,7 @@
 probabilities, covariance hygiene, and the local filter's handling of bad and asynchronous data."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -265,6 +266,34 @@ def test_outliers_are_gated_and_a_lost_track_restarts(params):
     assert report.outcome == "restarted"
     assert new.counters.restarts == 1
     assert _imm(new).combined()[0][0] == 500.0
+
+
+@pytest.mark.parametrize(
+    "ruin",
+    [
+        lambda imm: replace(imm, x=np.full_like(imm.x, np.nan)),
+        lambda imm: replace(imm, x=imm.x + np.array([1e36, 0, 0, 0, 0, 0])),
+        lambda imm: replace(imm, p=imm.p * 1e70),
+    ],
+    ids=["nan", "runaway", "unbounded-covariance"],
+)
+def test_a_diverged_track_restarts_on_the_next_observation_the_caller_allows(params, ruin):
+    state = _running(params)
+    ruined = replace(state, imm=ruin(_imm(state)))
+    t = _imm(state).t_s + 0.1
+    refused, report = local_step(ruined, _obs(t, 2.2, 0.0), params, may_restart=lambda _: False)
+    assert report.outcome == "gated"
+    assert "diverged" in report.reason
+    assert refused.imm is ruined.imm
+    if not np.all(np.isfinite(_imm(refused).x)):
+        assert refused.estimate() is None  # nothing non-finite goes out meanwhile
+    new, report = local_step(refused, _obs(t + 0.1, 2.4, 0.0), params)
+    assert report.outcome == "restarted"
+    assert "diverged" in report.reason
+    assert new.counters.restarts == 1
+    x, p = _imm(new).combined()
+    assert x[0] == 2.4
+    assert is_spd(p)
 
 
 def test_a_filter_that_hears_nothing_keeps_predicting_with_growing_covariance(params):
