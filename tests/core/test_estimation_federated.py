@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from app.core.estimation.federated import (
     ALLOCATION_IGNORED_AFTER_S,
+    MIN_SHARE_OF_EQUAL,
     MainParams,
     MainState,
     apply_feedback,
@@ -63,7 +64,24 @@ def test_information_shares_follow_the_frobenius_norms_and_sum_to_one(seeds):
     beta = information_shares(ps)
     assert beta.sum() == pytest.approx(1.0)
     norms = np.linalg.norm(ps, axis=(1, 2))
-    np.testing.assert_allclose(beta, (1 / norms) / np.sum(1 / norms))
+    raw = (1 / norms) / np.sum(1 / norms)
+    floor = MIN_SHARE_OF_EQUAL / len(seeds)
+    if np.all(raw >= floor):
+        np.testing.assert_allclose(beta, raw)
+    else:
+        assert np.all(beta >= 0.9 * floor)
+        assert np.all(np.diff(beta[np.argsort(norms)]) <= 1e-12)  # the more certain, the more
+
+
+def test_no_share_falls_below_a_tenth_of_an_equal_one():
+    """The allocation hands a filter P_g / beta: the least certain gets the least share and so
+    the largest covariance, and the loop ran one agent of twenty to a share of 4.3e-9 and its
+    filter to NaN. A tenth of an equal share is its floor."""
+    ps = np.stack([np.eye(6)] * 19 + [np.eye(6) * 1e9])
+    beta = information_shares(ps)
+    assert beta[-1] == pytest.approx(MIN_SHARE_OF_EQUAL / 20)
+    assert beta.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(beta[:-1], (1.0 - MIN_SHARE_OF_EQUAL / 20) / 19)
 
 
 def test_fusion_weights_the_more_certain_estimate():

@@ -159,11 +159,29 @@ def main_receive(state: MainState, estimate: LocalEstimate) -> MainState:
     )
 
 
+#: no share below this fraction of an equal one (1 / k): see ``information_shares``
+MIN_SHARE_OF_EQUAL = 0.1
+
+
 def information_shares(covariances: FloatArray) -> FloatArray:
-    """beta_i = ||P_i||_F^-1 / sum_j ||P_j||_F^-1 (Appendix A), for a stack (k, 6, 6); sums to 1."""
+    """beta_i = ||P_i||_F^-1 / sum_j ||P_j||_F^-1 (Appendix A), for a stack (k, 6, 6); sums to 1.
+
+    A share below ``MIN_SHARE_OF_EQUAL`` / k is raised to it (the others scaled to make room). The
+    allocation hands a filter P_g / beta_i: the least certain filter gets the smallest share,
+    so the largest covariance, so the smallest share next time, and nothing stops that loop.
+    In a run of twenty one agent's share fell to 4.3e-9, its allocated position variance to
+    8e7 m^2 (its process noise scaled by 1 / beta as well), and its filter ran away to NaN.
+    """
     norms = np.sqrt(np.sum(covariances * covariances, axis=(1, 2)))
     inv_norms: FloatArray = 1.0 / norms
     shares: FloatArray = inv_norms / np.sum(inv_norms)
+    floor = MIN_SHARE_OF_EQUAL / len(shares)
+    low = shares < floor
+    if np.any(low) and not np.all(low):
+        rest = shares[~low]
+        shares = shares.copy()
+        shares[low] = floor
+        shares[~low] = rest * (1.0 - floor * np.count_nonzero(low)) / np.sum(rest)
     return shares
 
 
