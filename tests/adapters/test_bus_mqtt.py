@@ -21,7 +21,7 @@ from app.errors import BusError, ConfigError
 from app.runtime.ports import topics
 from app.runtime.ports.messages import LinkState
 from tests.adapters.test_bus_conformance import WAIT_S, observation, take
-from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.mosquitto import Mosquitto, free_port, refused_port
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -241,11 +241,13 @@ def test_bad_urls_are_refused_with_the_reason(url: str, reason: str) -> None:
 
 
 async def test_an_unreachable_broker_is_a_bus_error_naming_it() -> None:
-    port = free_port()  # nothing listens there
-    bus = open_bus(f"mqtt://127.0.0.1:{port}", connect_timeout_s=0.5)
-    with pytest.raises(BusError, match=f"cannot connect to the broker at mqtt://127.0.0.1:{port}"):
-        async with bus:
-            pass
+    with refused_port() as port:
+        bus = open_bus(f"mqtt://127.0.0.1:{port}", connect_timeout_s=0.5)
+        with pytest.raises(
+            BusError, match=f"cannot connect to the broker at mqtt://127.0.0.1:{port}"
+        ):
+            async with bus:
+                pass
     assert not bus.is_open
 
 
@@ -256,15 +258,16 @@ async def test_reconnect_back_off_grows_to_its_cap_on_the_injected_clock() -> No
         waits.append(seconds)
         await asyncio.sleep(0)
 
-    bus = MqttBus(
-        f"mqtt://127.0.0.1:{free_port()}",
-        backoff=Backoff(initial_s=1.0, factor=2.0, max_s=8.0),
-        connect_timeout_s=0.3,
-        sleep=fake_sleep,
-    )
-    with pytest.raises(BusError):
-        async with bus:
-            pass
+    with refused_port() as port:
+        bus = MqttBus(
+            f"mqtt://127.0.0.1:{port}",
+            backoff=Backoff(initial_s=1.0, factor=2.0, max_s=8.0),
+            connect_timeout_s=0.3,
+            sleep=fake_sleep,
+        )
+        with pytest.raises(BusError):
+            async with bus:
+                pass
     assert len(waits) >= 6
     assert waits[:6] == [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]
 

@@ -25,6 +25,7 @@ from app.adapters.vehicle.mavsdk.urls import (
 )
 from app.errors import ConfigError, LinkError
 from sitl.px4 import Px4TimesyncAnswer
+from tests.support.mosquitto import refused_port
 
 APP_ID, GCS_ID, VEHICLE_ID = 245, 255, 3
 
@@ -408,8 +409,7 @@ async def test_a_tcp_vehicle_is_relayed_packet_by_packet_and_reconnected(tmp_pat
 
 
 async def test_a_tcp_vehicle_that_is_not_there_is_named():
-    port = free_port()  # nothing listens on TCP there (a free UDP port, most likely free in TCP)
-    with pytest.raises(LinkError, match=f"TCP 127.0.0.1:{port}"):
+    with refused_port() as port, pytest.raises(LinkError, match=f"TCP 127.0.0.1:{port}"):
         async with MavlinkRelay(UdpEndpoint("tcpout", "127.0.0.1", port)):
             pass
 

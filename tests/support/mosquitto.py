@@ -15,6 +15,7 @@ import shutil
 import socket
 import subprocess
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from app.adapters.bus import Login
@@ -37,6 +38,20 @@ def free_port() -> int:
         sock.bind(("127.0.0.1", 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+@contextlib.contextmanager
+def refused_port() -> Iterator[int]:
+    """A loopback TCP port that refuses every connection while the block runs: bound, never
+    listening. A port that was merely free when it was picked can be taken before or while the
+    test connects to it: by another test's server on a concurrent lane, or by the connecting
+    client itself as its source port (TCP simultaneous open). A CI run saw the MQTT client read
+    an unrecognised packet type 16 (a CONNECT) from such a port; which of the two it was is not
+    known. Held bound, the port can be neither.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        yield int(sock.getsockname()[1])
 
 
 class Mosquitto:

@@ -39,7 +39,7 @@ from app.runtime.ports import topics
 from sitl.ports import find_free_udp_base_port
 from sitl.px4 import HOLD
 from sitl.vehicle import AUTOPILOT_COMPONENT
-from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.mosquitto import Mosquitto, refused_port
 from tests.support.sitl_fixtures import RawClient
 
 pytestmark = pytest.mark.slow
@@ -640,12 +640,12 @@ def test_ctrl_c_on_the_ground_station_interrupts_and_tells_the_agents(
 
 async def test_agent_with_the_broker_down_exits_with_one_line(tmp_path: Path) -> None:
     mission = write_mission(tmp_path)
-    port = free_port()  # nothing listens there
-    async with standoff(
-        "agent", "--vehicle", "1", str(mission), "--broker", f"mqtt://127.0.0.1:{port}",
-        "--out", str(tmp_path / "run"), stderr_path=tmp_path / "a.err",
-    ) as agent:  # fmt: skip
-        assert await agent.finish(40.0) == 2
+    with refused_port() as port:
+        async with standoff(
+            "agent", "--vehicle", "1", str(mission), "--broker", f"mqtt://127.0.0.1:{port}",
+            "--out", str(tmp_path / "run"), stderr_path=tmp_path / "a.err",
+        ) as agent:  # fmt: skip
+            assert await agent.finish(40.0) == 2
     # the bus logs each refused attempt (warnings), then the command gives its one-line reason
     *retries, line = agent.stderr().strip().splitlines()
     assert line.startswith("standoff agent: error: cannot connect to the broker at ")
