@@ -187,7 +187,9 @@ class PhaseParams:
     largest one, so that the team closes its gaps at the lead speed instead of about cruise
     (None: about cruise, the paper's law). Up to 10 m outside the circle, at distance r, the lead
     is held to W r_d^2 / r (W the course-rate limit), fading back to the lead by 20 m out: at
-    W r_d itself the circle takes the whole turn, and a leader blown out would stay out.
+    W r_d itself the circle takes the whole turn, and a leader blown out would stay out. With
+    ``lead_held_outside`` (the mission's adjust stage, the team already gathered) it is held at
+    any distance outside: the fade is for a leader still flying in from afar in gather.
 
     ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
     too: at ground speed s on a circle around a target moving at v_t the relative speed along
@@ -206,6 +208,7 @@ class PhaseParams:
     radius_step_m: float = 0.5
     radius_phase: RadiusPhase = "orbit_time"
     lead_speed_m_s: float | None = None
+    lead_held_outside: bool = False
 
     def __post_init__(self) -> None:
         if self.lead_speed_m_s is not None and not (
@@ -541,13 +544,14 @@ def _speed_command(
         # the law: the team closes its gaps at the lead speed (not about cruise); the radius
         # actuator's wanted speed stays about cruise (it holds its speed)
         error, base = error - max(errors), ph.lead_speed_m_s
-        if radius_m < own_r < radius_m + 2.0 * _LEAD_BAND_M:
+        held = ph.lead_held_outside and own_r > radius_m
+        if held or radius_m < own_r < radius_m + 2.0 * _LEAD_BAND_M:
             # just outside the circle, no faster than the speed whose full turn rate tightens
             # the orbit (v / W <= r_d^2 / r < r_d): at W r_d itself there is no turn to spare,
             # and a leader blown out stays out until its speed drops; faded out over a second
-            # band (a leader still flying in from afar keeps the lead)
+            # band (a leader still flying in from afar keeps the lead), unless held outside
             cap = env.max_course_rate_rad_s * radius_m * radius_m / own_r
-            fade = min(1.0, (radius_m + 2.0 * _LEAD_BAND_M - own_r) / _LEAD_BAND_M)
+            fade = 1.0 if held else min(1.0, (radius_m + 2.0 * _LEAD_BAND_M - own_r) / _LEAD_BAND_M)
             base = min(base, base - fade * (base - cap))
     return phase.phase_speed(
         error,

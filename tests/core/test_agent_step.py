@@ -182,15 +182,14 @@ def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in(
     the lead speed again on or inside it."""
     rd, lead = 110.0, 0.2 * 110.0  # W r_d = 22 m/s
 
-    def leader_speed(radius_m: float) -> float:
+    def leader_speed(radius_m: float, held: bool = False) -> float:
         angles = (0.0, 30.0, 50.0)  # vehicle 2 is furthest behind its seat
         team = tuple(
             (r * math.cos(math.radians(a)), r * math.sin(math.radians(a)))
             for r, a in zip((rd, rd, radius_m), angles, strict=True)
         )
-        params = AgentParams(
-            2, ENV, GuidanceParams(rd), PhaseParams("paper", 0.005, lead_speed_m_s=lead)
-        )
+        phase = PhaseParams("paper", 0.005, lead_speed_m_s=lead, lead_held_outside=held)
+        params = AgentParams(2, ENV, GuidanceParams(rd), phase)
         e, n = team[2]
         inputs = _inputs(e, n, -math.atan2(n, e), 20.0, team=team)
         return agent_step(AgentState(), inputs, params)[1].speed_m_s
@@ -203,6 +202,11 @@ def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in(
     assert leader_speed(rd + 15.0) == pytest.approx(0.5 * (lead + 0.2 * rd * rd / (rd + 15.0)))
     assert leader_speed(rd + 20.0) == pytest.approx(lead)
     assert leader_speed(rd + 500.0) == pytest.approx(lead)
+    # held outside (the mission's adjust stage): no fade, whatever the distance
+    for out in (10.0, 15.0, 30.0, 60.0):
+        assert leader_speed(rd + out, held=True) == pytest.approx(0.2 * rd * rd / (rd + out))
+    assert leader_speed(rd, held=True) == pytest.approx(lead)
+    assert leader_speed(rd - 8.0, held=True) == pytest.approx(lead)
 
 
 def test_moving_target_speed_is_relative_to_the_target():

@@ -243,3 +243,29 @@ def test_moving_speed_must_be_a_non_negative_number():
         replace(params(0), moving_speed_m_s=math.nan)
     with pytest.raises(ValueError, match="moving_speed_m_s"):
         replace(params(0), moving_speed_m_s=-1.0)
+
+
+def test_in_adjust_a_leader_blown_far_outside_is_held_to_a_speed_that_turns_it_back():
+    # The lead speed 18 m/s is W r_d: the 90 m circle takes the whole turn there. 40 m outside,
+    # beyond the lead's 20 m band, gather keeps the lead (a leader still flying in from afar);
+    # adjust, with the team gathered, holds it to W r_d^2 / r so that it can turn back in.
+    lead = 18.0
+    base = params(0)
+    p = replace(
+        base, agent=replace(base.agent, phase=PhaseParams("paper", 0.1, lead_speed_m_s=lead))
+    )
+    r = 130.0
+
+    def speed_in(stage: str) -> float:
+        state = hear_mission(initial_agent_state(p), stage, (0, 1, 2))
+        state = hear_fused(state, fused_at(0.0, 0.0, 0.0), p)
+        for vehicle, deg in ((1, 150.0), (2, 270.0)):  # vehicle 0 is furthest behind its seat
+            a = math.radians(deg)
+            fix = TeammateFix(0.0, 90.0 * math.cos(a), 90.0 * math.sin(a), -a, 14.0)
+            state = hear_teammate(state, vehicle, fix)
+        _, cmd, _ = control(state, 0.0, own(FixedWingState(r, 0.0, 0.0, lead)), p)
+        return cmd.speed_m_s
+
+    held = 0.2 * 90.0 * 90.0 / r
+    assert speed_in("adjust") <= held + 1e-9
+    assert speed_in("gather") > held + 2.0

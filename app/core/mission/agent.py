@@ -30,6 +30,7 @@ what is to be sent or recorded; when the local estimate and the status are due i
 state (``MissionAgentState.estimates``, ``.statuses``).
 """
 
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
@@ -1314,11 +1315,24 @@ def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentPar
     """The guidance and phase keeping flown now: ``track`` in the track stage, and in adjust
     once the target is seen moving faster than ``moving_speed_m_s`` (where the ground station
     itself moves on to track); else ``agent``."""
+    adjusting = state.stage == "adjust"
     if params.track is None:
-        return params.agent
+        return _lead_held(params.agent) if adjusting else params.agent
     moving = math.hypot(target.v_east_m_s, target.v_north_m_s) > params.moving_speed_m_s
-    tracking = state.stage == "track" or (state.stage == "adjust" and moving)
-    return params.track if tracking else params.agent
+    if state.stage == "track" or (adjusting and moving):
+        return params.track
+    return _lead_held(params.agent) if adjusting else params.agent
+
+
+@functools.lru_cache(maxsize=64)
+def _lead_held(agent: AgentParams) -> AgentParams:
+    """``agent`` with the lead speed held down at any distance outside the circle
+    (``PhaseParams.lead_held_outside``): in adjust the team has gathered, and a vehicle blown
+    out beyond the lead's 20 m band at 18 m/s (W r_d) would find no turn to come back with
+    (twenty vehicles were carried 40-66 m out for 40 s at the lead speed)."""
+    if agent.phase.lead_speed_m_s is None:
+        return agent
+    return replace(agent, phase=replace(agent.phase, lead_held_outside=True))
 
 
 # --- the step every driver pumps ------------------------------------------------------------
