@@ -14,6 +14,7 @@ from pydantic import Field, field_validator, model_validator
 from app.adapters.vehicle.mavsdk.urls import parse_gcs_endpoint
 from app.config.schema import (
     Finite,
+    Fraction,
     GuidanceConfig,
     LimitsConfig,
     LocalPosition,
@@ -105,10 +106,15 @@ class MissionPhaseConfig(PhaseConfig):
     the vehicle furthest behind its seat flies this speed and the others slower by the law, so
     that the team closes its gaps at this speed rather than about cruise (None: about cruise,
     the paper's law); within the envelope's speed range. An agent flies it only where the
-    circle can be flown all round at it in the wind it knows (docs/guidance.md "Lead speed")."""
+    circle can be flown all round at it in the wind it knows (docs/guidance.md "Lead speed").
+    ``adjust_lead_turn_share``: in adjust, where the team has gathered on the circle, the lead
+    is at most this share of W r_d (W the course-rate limit), the speed at which the circle
+    takes the whole turn: twenty vehicles at the 18 m/s lead (W r_d) were pushed 3-8 m out
+    again and again and did not hold the formation's 3 m for 5 s."""
 
     track_gain_per_s: NonNegative | None = None
     gather_lead_speed_m_s: Positive | None = None
+    adjust_lead_turn_share: Fraction = 0.9
 
 
 class StandbyConfig(StrictModel):

@@ -70,7 +70,11 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
         # ``auto`` is ``speed`` here (the built-in simulator and the fast simulation honour a
         # speed command); the runtime resolves it per vehicle (``phase_actuator``)
         track_phase = config.phase.build(honours_speed=True)
-        phase = replace(track_phase, lead_speed_m_s=config.phase.gather_lead_speed_m_s)
+        phase = replace(
+            track_phase,
+            lead_speed_m_s=config.phase.gather_lead_speed_m_s,
+            held_lead_turn_share=config.phase.adjust_lead_turn_share,
+        )
         track_gain = config.phase.track_gain_per_s
         if track_gain is not None:
             track_phase = replace(track_phase, gain_per_s=track_gain)

@@ -189,7 +189,9 @@ class PhaseParams:
     is held to W r_d^2 / r (W the course-rate limit), fading back to the lead by 20 m out: at
     W r_d itself the circle takes the whole turn, and a leader blown out would stay out. With
     ``lead_held_outside`` (the mission's adjust stage, the team already gathered) it is held at
-    any distance outside: the fade is for a leader still flying in from afar in gather.
+    any distance outside: the fade is for a leader still flying in from afar in gather; and it
+    is at most ``held_lead_turn_share`` of W r_d anywhere (a team on the circle at W r_d has no
+    turn to spare, and twenty vehicles there were pushed out again and again).
 
     ``radius_phase = "polar"`` keeps the polar angles themselves spaced instead, by the radius
     too: at ground speed s on a circle around a target moving at v_t the relative speed along
@@ -209,8 +211,15 @@ class PhaseParams:
     radius_phase: RadiusPhase = "orbit_time"
     lead_speed_m_s: float | None = None
     lead_held_outside: bool = False
+    held_lead_turn_share: float = 1.0
 
     def __post_init__(self) -> None:
+        if not (
+            math.isfinite(self.held_lead_turn_share) and 0.0 < self.held_lead_turn_share <= 1.0
+        ):
+            raise ValueError(
+                f"PhaseParams.held_lead_turn_share must be in (0, 1]: {self.held_lead_turn_share}"
+            )
         if self.lead_speed_m_s is not None and not (
             math.isfinite(self.lead_speed_m_s) and self.lead_speed_m_s > 0.0
         ):
@@ -544,6 +553,9 @@ def _speed_command(
         # the law: the team closes its gaps at the lead speed (not about cruise); the radius
         # actuator's wanted speed stays about cruise (it holds its speed)
         error, base = error - max(errors), ph.lead_speed_m_s
+        if ph.lead_held_outside:
+            # the team has gathered: on the circle, keep a share of the turn rate to spare
+            base = min(base, ph.held_lead_turn_share * env.max_course_rate_rad_s * radius_m)
         held = ph.lead_held_outside and own_r > radius_m
         if held or radius_m < own_r < radius_m + 2.0 * _LEAD_BAND_M:
             # just outside the circle, no faster than the speed whose full turn rate tightens

@@ -252,6 +252,18 @@ def test_the_gather_lead_speed_reaches_gather_and_adjust_only_and_stays_in_the_e
         validate_config(raw, MissionConfig, source="m.toml")
 
 
+def test_the_adjust_lead_turn_share_reaches_the_agents_and_is_a_fraction() -> None:
+    for agent in build_plan(load_config("hil", MissionConfig)).agents:
+        assert agent.agent.phase.held_lead_turn_share == 0.9  # the default
+    raw = {**BASE, "phase": {**BASE["phase"], "adjust_lead_turn_share": 0.8}}
+    for agent in build_plan(validate_config(raw, MissionConfig, source="m.toml")).agents:
+        assert agent.agent.phase.held_lead_turn_share == 0.8
+    for bad in (0.0, 1.2, "nan"):
+        raw = {**BASE, "phase": {**BASE["phase"], "adjust_lead_turn_share": bad}}
+        with pytest.raises(ConfigError, match="adjust_lead_turn_share"):
+            validate_config(raw, MissionConfig, source="m.toml")
+
+
 def test_the_ground_fuses_and_allocates_at_the_missions_periods():
     default = build_plan(load_config("hil", MissionConfig)).ground
     assert (default.fuse_period_s, default.feedback_period_s) == (0.2, 1.0)

@@ -176,6 +176,51 @@ def test_a_lead_speed_flies_the_vehicle_furthest_behind_at_it_and_the_rest_slowe
         PhaseParams("paper", lead_speed_m_s=math.nan)
 
 
+def _leader_speed(
+    rd: float, lead: float, radius_m: float, held: bool = False, share: float = 1.0
+) -> float:
+    """The speed commanded to vehicle 2 of three on the circle ``rd`` (vehicles 0 and 1), the
+    one furthest behind its seat, ``radius_m`` from the target."""
+    angles = (0.0, 30.0, 50.0)  # vehicle 2 is furthest behind its seat
+    team = tuple(
+        (r * math.cos(math.radians(a)), r * math.sin(math.radians(a)))
+        for r, a in zip((rd, rd, radius_m), angles, strict=True)
+    )
+    phase = PhaseParams(
+        "paper",
+        0.005,
+        lead_speed_m_s=lead,
+        lead_held_outside=held,
+        held_lead_turn_share=share,
+    )
+    params = AgentParams(2, ENV, GuidanceParams(rd), phase)
+    e, n = team[2]
+    inputs = _inputs(e, n, -math.atan2(n, e), 20.0, team=team)
+    return agent_step(AgentState(), inputs, params)[1].speed_m_s
+
+
+def test_a_held_lead_keeps_a_share_of_the_turn_rate_to_spare_on_the_circle() -> None:
+    """Held (the mission's adjust stage), the lead is at most ``held_lead_turn_share`` of
+    W r_d on, inside and outside the circle, and W r_d^2 / r further out where that is less;
+    in gather (not held) the share does not apply."""
+    rd, lead, share = 110.0, 0.2 * 110.0, 0.9
+    cap = share * 0.2 * rd
+    assert _leader_speed(rd, lead, rd, held=True, share=share) == pytest.approx(cap)
+    assert _leader_speed(rd, lead, rd - 8.0, held=True, share=share) == pytest.approx(cap)
+    assert _leader_speed(rd, lead, rd + 5.0, held=True, share=share) == pytest.approx(cap)
+    assert _leader_speed(rd, lead, rd + 30.0, held=True, share=share) == pytest.approx(
+        0.2 * rd * rd / (rd + 30.0)
+    )
+    assert _leader_speed(rd, lead, rd, share=share) == pytest.approx(lead)
+    # a lead already below the share is flown as it is
+    slow = 0.8 * 0.2 * rd
+    assert _leader_speed(rd, slow, rd, held=True, share=share) == pytest.approx(slow)
+    with pytest.raises(ValueError, match="held_lead_turn_share"):
+        PhaseParams("paper", held_lead_turn_share=0.0)
+    with pytest.raises(ValueError, match="held_lead_turn_share"):
+        PhaseParams("paper", held_lead_turn_share=math.nan)
+
+
 def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in() -> None:
     """At the lead speed W r_d the circle takes the whole turn-rate limit W; a leader blown
     outside it is held to W r_d^2 / r, whose full turn is tighter than the circle, and flies
@@ -183,16 +228,7 @@ def test_a_leader_outside_the_circle_is_slowed_to_a_speed_that_turns_it_back_in(
     rd, lead = 110.0, 0.2 * 110.0  # W r_d = 22 m/s
 
     def leader_speed(radius_m: float, held: bool = False) -> float:
-        angles = (0.0, 30.0, 50.0)  # vehicle 2 is furthest behind its seat
-        team = tuple(
-            (r * math.cos(math.radians(a)), r * math.sin(math.radians(a)))
-            for r, a in zip((rd, rd, radius_m), angles, strict=True)
-        )
-        phase = PhaseParams("paper", 0.005, lead_speed_m_s=lead, lead_held_outside=held)
-        params = AgentParams(2, ENV, GuidanceParams(rd), phase)
-        e, n = team[2]
-        inputs = _inputs(e, n, -math.atan2(n, e), 20.0, team=team)
-        return agent_step(AgentState(), inputs, params)[1].speed_m_s
+        return _leader_speed(rd, lead, radius_m, held)
 
     assert leader_speed(rd) == pytest.approx(lead)
     assert leader_speed(rd - 8.0) == pytest.approx(lead)

@@ -1326,10 +1326,11 @@ def _flown(state: MissionAgentState, target: TargetInfo, params: MissionAgentPar
 
 @functools.lru_cache(maxsize=64)
 def _lead_held(agent: AgentParams) -> AgentParams:
-    """``agent`` with the lead speed held down at any distance outside the circle
-    (``PhaseParams.lead_held_outside``): in adjust the team has gathered, and a vehicle blown
-    out beyond the lead's 20 m band at 18 m/s (W r_d) would find no turn to come back with
-    (twenty vehicles were carried 40-66 m out for 40 s at the lead speed)."""
+    """``agent`` with the lead speed held down at any distance outside the circle, and to its
+    ``held_lead_turn_share`` of W r_d on it (``PhaseParams.lead_held_outside``): in adjust the
+    team has gathered, and a vehicle blown out beyond the lead's 20 m band at 18 m/s (W r_d)
+    would find no turn to come back with (twenty vehicles were carried 40-66 m out for 40 s at
+    the lead speed), while at W r_d on the circle twenty were pushed 3-8 m out again and again."""
     if agent.phase.lead_speed_m_s is None:
         return agent
     return replace(agent, phase=replace(agent.phase, lead_held_outside=True))
