@@ -245,49 +245,38 @@ def test_moving_speed_must_be_a_non_negative_number():
         replace(params(0), moving_speed_m_s=-1.0)
 
 
+def _lead_speed_in(stage: str, phase: PhaseParams, vehicle_0: FixedWingState) -> float:
+    """The speed commanded to vehicle 0 (furthest behind its seat, at ``vehicle_0``) in
+    ``stage``, its teammates on the 90 m circle at 150 and 270 degrees."""
+    base = params(0)
+    p = replace(base, agent=replace(base.agent, phase=phase))
+    state = hear_mission(initial_agent_state(p), stage, (0, 1, 2))
+    state = hear_fused(state, fused_at(0.0, 0.0, 0.0), p)
+    for vehicle, deg in ((1, 150.0), (2, 270.0)):
+        a = math.radians(deg)
+        fix = TeammateFix(0.0, 90.0 * math.cos(a), 90.0 * math.sin(a), -a, 14.0)
+        state = hear_teammate(state, vehicle, fix)
+    _, cmd, _ = control(state, 0.0, own(vehicle_0), p)
+    return cmd.speed_m_s
+
+
 def test_in_adjust_a_leader_blown_far_outside_is_held_to_a_speed_that_turns_it_back():
     # The lead speed 18 m/s is W r_d: the 90 m circle takes the whole turn there. 40 m outside,
     # beyond the lead's 20 m band, gather keeps the lead (a leader still flying in from afar);
     # adjust, with the team gathered, holds it to W r_d^2 / r so that it can turn back in.
-    lead = 18.0
-    base = params(0)
-    p = replace(
-        base, agent=replace(base.agent, phase=PhaseParams("paper", 0.1, lead_speed_m_s=lead))
-    )
-    r = 130.0
-
-    def speed_in(stage: str) -> float:
-        state = hear_mission(initial_agent_state(p), stage, (0, 1, 2))
-        state = hear_fused(state, fused_at(0.0, 0.0, 0.0), p)
-        for vehicle, deg in ((1, 150.0), (2, 270.0)):  # vehicle 0 is furthest behind its seat
-            a = math.radians(deg)
-            fix = TeammateFix(0.0, 90.0 * math.cos(a), 90.0 * math.sin(a), -a, 14.0)
-            state = hear_teammate(state, vehicle, fix)
-        _, cmd, _ = control(state, 0.0, own(FixedWingState(r, 0.0, 0.0, lead)), p)
-        return cmd.speed_m_s
-
+    lead, r = 18.0, 130.0
+    phase = PhaseParams("paper", 0.1, lead_speed_m_s=lead)
+    outside = FixedWingState(r, 0.0, 0.0, lead)
     held = 0.2 * 90.0 * 90.0 / r
-    assert speed_in("adjust") <= held + 1e-9
-    assert speed_in("gather") > held + 2.0
+    assert _lead_speed_in("adjust", phase, outside) <= held + 1e-9
+    assert _lead_speed_in("gather", phase, outside) > held + 2.0
 
 
 def test_in_adjust_the_lead_on_the_circle_keeps_a_share_of_the_turn_rate_to_spare():
     # On the circle, gather flies the 18 m/s lead (W r_d: the whole turn); adjust, with the
     # team gathered, at most 0.9 of it, the mission's adjust_lead_turn_share.
     lead, share = 18.0, 0.9
-    base = params(0)
     phase = PhaseParams("paper", 0.1, lead_speed_m_s=lead, held_lead_turn_share=share)
-    p = replace(base, agent=replace(base.agent, phase=phase))
-
-    def speed_in(stage: str) -> float:
-        state = hear_mission(initial_agent_state(p), stage, (0, 1, 2))
-        state = hear_fused(state, fused_at(0.0, 0.0, 0.0), p)
-        for vehicle, deg in ((1, 150.0), (2, 270.0)):  # vehicle 0 is furthest behind its seat
-            a = math.radians(deg)
-            fix = TeammateFix(0.0, 90.0 * math.cos(a), 90.0 * math.sin(a), -a, 14.0)
-            state = hear_teammate(state, vehicle, fix)
-        _, cmd, _ = control(state, 0.0, own(FixedWingState(90.0, 0.0, math.pi / 2, lead)), p)
-        return cmd.speed_m_s
-
-    assert speed_in("gather") == pytest.approx(lead)
-    assert speed_in("adjust") == pytest.approx(share * 0.2 * 90.0)
+    on_circle = FixedWingState(90.0, 0.0, math.pi / 2, lead)
+    assert _lead_speed_in("gather", phase, on_circle) == pytest.approx(lead)
+    assert _lead_speed_in("adjust", phase, on_circle) == pytest.approx(share * 0.2 * 90.0)
