@@ -176,7 +176,7 @@ def main() -> None:
         " dist: RMS distance error m; spacing: RMS"
         " spacing error deg; means over the runs (never: some run did not form), ratios against"
         " the first row. CPU: % of one core per vehicle at 1x real time: the agents' own"
-        " steps, the whole app process, and with its children (simulator, mavsdk_server);"
+        " steps, the whole app process, and with its children (simulator, MAVLink relays);"
         " skipped: telemetry frames steered past because a tick was still running)"
     )
 

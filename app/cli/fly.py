@@ -231,7 +231,7 @@ def _cpu_line(summary: dict[str, object]) -> str:
     return (
         "CPU per vehicle at 1x real time (of one core): agents' own work "
         f"{pct('agents')}, this process {pct('process')}"
-        f" (ground, agents, links, relays), with the simulator and mavsdk_server"
+        f" (ground, agents, links), with its children (the simulator, the MAVLink relays)"
         f" {pct('with_children')}"
     )
 

@@ -14,11 +14,10 @@ from typing import Any
 
 from app.adapters.eventlog import EventLog
 from app.adapters.observations_log import ObservationLog, observations_file
-from app.adapters.tlog import TlogRecorder
 from app.adapters.vehicle.autopilots.px4 import px4_mission_rates
 from app.adapters.vehicle.mavsdk.hub import MavsdkHub
 from app.adapters.vehicle.mavsdk.link import LinkConfig
-from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
+from app.adapters.vehicle.mavsdk.relay_process import RelayProcess, RelaySpec
 from app.adapters.vehicle.mavsdk.urls import UdpEndpoint, parse_gcs_endpoint, udp_endpoint_of_url
 from app.config.plan import MissionPlan
 from app.core.mission.team import TeamSample
@@ -135,7 +134,8 @@ async def open_links(
     """One MAVSDK hub on ``urls`` and a link to each of ``vehicles`` (0-based: system id i+1),
     every vehicle's boot clock mapped onto ``mission_clock`` (``MissionClock``).
 
-    With ``out_dir`` or ``gcs``, every UDP connection goes through a ``MavlinkRelay``: each
+    With ``out_dir`` or ``gcs``, every UDP connection goes through a ``MavlinkRelay`` (all of
+    them in one process of their own, ``RelayProcess``): each
     vehicle's traffic, both ways, recorded in ``out_dir/vehicle-{i+1}.tlog`` from the links'
     opening (the take-off and the climb to the hand-over are in the flight log), and served to
     the ground station at ``gcs``. ``notify``: a line per connection for the operator."""
@@ -143,19 +143,20 @@ async def open_links(
     origin = GeodeticOrigin(cfg.origin.lat_deg, cfg.origin.lon_deg, cfg.origin.alt_m)
     config = link_config(plan, builtin)
     async with AsyncExitStack() as stack:
-        recorder = (
-            stack.enter_context(TlogRecorder.for_vehicles(out_dir, [i + 1 for i in vehicles]))
-            if out_dir is not None
-            else None
-        )
         app_urls = list(urls)
-        if recorder is not None or gcs is not None:
-            # the relays in a thread of their own, so that no tick of this loop delays a datagram
-            relays = stack.enter_context(RelayThread())
-            app_urls = [
-                await _relayed(stack, relays, url, k, vehicles, urls, recorder, gcs, notify)
-                for k, url in enumerate(urls)
-            ]
+        specs = relay_specs(urls, vehicles, gcs) if out_dir is not None or gcs is not None else {}
+        if specs:
+            tlogs = (
+                {i + 1: out_dir / f"vehicle-{i + 1}.tlog" for i in vehicles}
+                if out_dir is not None
+                else {}
+            )
+            # the relays in a process of their own: no tick of this interpreter delays a datagram
+            relays = await stack.enter_async_context(RelayProcess(list(specs.values()), tlogs))
+            for k, relayed in zip(specs, relays.links, strict=True):
+                app_urls[k] = relayed.app_url
+                if notify is not None:
+                    notify(f"  {relayed.description}")
         hub = await stack.enter_async_context(
             MavsdkHub(app_urls, origin, mission_clock=mission_clock)
         )
@@ -167,45 +168,31 @@ async def open_links(
         yield links
 
 
-async def _relayed(
-    stack: AsyncExitStack,
-    relays: RelayThread,
-    url: str,
-    k: int,
-    vehicles: Sequence[int],
-    urls: Sequence[str],
-    recorder: TlogRecorder | None,
-    gcs: UdpEndpoint | None,
-    notify: Callable[[str], None] | None,
-) -> str:
-    """The URL MAVSDK opens for connection ``k``: its relay's, or the connection itself when
-    the relay cannot open it (``tcpin``, serial: flown directly, with no flight log and no
-    ground station)."""
-    endpoint = udp_endpoint_of_url(url)
-    if endpoint is None:
-        _log.warning(
-            "%s is flown directly: the relay (flight log, ground station) takes UDP and TCP "
-            "client URLs only",
-            url,
-        )
-        return url
+def relay_specs(
+    urls: Sequence[str], vehicles: Sequence[int], gcs: UdpEndpoint | None
+) -> dict[int, RelaySpec]:
+    """The relay of each connection the relay can open (by its index in ``urls``); the others
+    (``tcpin``, serial) are flown directly, with no flight log and no ground station."""
     # each connection one vehicle: vehicle i's own ground-station port, and its system id
     one_each = len(urls) == len(vehicles)
-    relay = await stack.enter_async_context(
-        relays.hosting(
-            MavlinkRelay(
-                endpoint,
-                recorder=recorder,
-                gcs=gcs,
-                gcs_index=vehicles[k] if one_each else k,
-                system_ids=frozenset({vehicles[k] + 1}) if one_each else frozenset(),
-                name=f"relay {url}",
+    specs: dict[int, RelaySpec] = {}
+    for k, url in enumerate(urls):
+        endpoint = udp_endpoint_of_url(url)
+        if endpoint is None:
+            _log.warning(
+                "%s is flown directly: the relay (flight log, ground station) takes UDP and TCP "
+                "client URLs only",
+                url,
             )
+            continue
+        specs[k] = RelaySpec(
+            endpoint,
+            gcs=gcs,
+            gcs_index=vehicles[k] if one_each else k,
+            system_ids=frozenset({vehicles[k] + 1}) if one_each else frozenset(),
+            name=f"relay {url}",
         )
-    )
-    if notify is not None:
-        notify(f"  {relay.describe()}")
-    return relay.app_url
+    return specs
 
 
 def observation_sources(plan: MissionPlan, replay: Sequence[Measurement] = ()) -> list[TickSource]:

@@ -3,6 +3,9 @@ pymavlink peers: bytes passed on unchanged, addressed packets routed to the side
 system, both directions recorded in the vehicle's .tlog, and its own faults kept out of the way."""
 
 import asyncio
+import json
+import os
+import signal
 import socket
 import time
 
@@ -17,12 +20,14 @@ from app.adapters.vehicle.mavsdk.packets import (
     split_packets,
     split_stream,
 )
-from app.adapters.vehicle.mavsdk.relay import MavlinkRelay, RelayThread
+from app.adapters.vehicle.mavsdk.relay import MavlinkRelay
+from app.adapters.vehicle.mavsdk.relay_process import RelayProcess, RelaySpec
 from app.adapters.vehicle.mavsdk.urls import (
     UdpEndpoint,
     parse_gcs_endpoint,
     udp_endpoint_of_url,
 )
+from app.compose.parts import relay_specs
 from app.errors import ConfigError, LinkError
 from sitl.px4 import Px4TimesyncAnswer
 from tests.support.mosquitto import refused_port
@@ -422,10 +427,12 @@ def read_messages(path) -> list[mavlink.MAVLink_message]:
     return out
 
 
-async def test_a_relay_in_its_own_thread_forwards_while_the_mission_loop_is_busy() -> None:
-    """The mission runs its relays in a RelayThread: a datagram from the vehicle reaches the app
-    while the mission's own loop is blocked in a long tick (on that loop it waited the tick
-    out), and the relay closes with the block that hosted it."""
+async def test_relays_in_a_process_of_their_own_forward_while_the_mission_loop_is_busy(
+    tmp_path, caplog
+) -> None:
+    """The mission runs its relays in a RelayProcess: a datagram from the vehicle reaches the
+    app while the mission's own loop is blocked in a long tick, both directions go into the
+    vehicle's .tlog, the counters come back, and the relay is gone with the block."""
     vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     app = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
@@ -434,26 +441,87 @@ async def test_a_relay_in_its_own_thread_forwards_while_the_mission_loop_is_busy
         app.settimeout(2.0)
         endpoint = udp_endpoint_of_url(f"udpout://127.0.0.1:{vehicle.getsockname()[1]}")
         assert endpoint is not None
-        with RelayThread() as relays:
-            async with relays.hosting(MavlinkRelay(endpoint, name="threaded")) as relay:
-                app_port = int(relay.app_url.rsplit(":", 1)[1])
-                app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", app_port))
-                _, relay_addr = await asyncio.to_thread(vehicle.recvfrom, 4096)
-                beat = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
-                sent = time.monotonic()
-                vehicle.sendto(beat, relay_addr)
-                # this loop blocked (as in a long tick) while the app waits for the datagram: a
-                # relay on this loop would pass nothing on until the block ends (here: never)
-                data, _ = app.recvfrom(4096)
-                waited_s = time.monotonic() - sent
-            assert data == beat
-            assert waited_s < 0.2
-            assert relay.counters.from_vehicle == 1
+        tlog = tmp_path / f"vehicle-{VEHICLE_ID}.tlog"
+        spec = RelaySpec(endpoint, system_ids=frozenset({VEHICLE_ID}), name="apart")
+        async with RelayProcess([spec], {VEHICLE_ID: tlog}) as relays:
+            (link,) = relays.links
+            assert link.description == f"vehicle link {endpoint.url}, ground station not served"
+            port = int(link.app_url.rsplit(":", 1)[1])
+            app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", port))
+            _, relay_addr = await asyncio.to_thread(vehicle.recvfrom, 4096)
+            beat = pack(heartbeat(mavlink.MAV_TYPE_FIXED_WING), VEHICLE_ID)
+            sent = time.monotonic()
+            vehicle.sendto(beat, relay_addr)
+            # this loop blocked (as in a long tick) while the app waits for the datagram
+            data, _ = app.recvfrom(4096)
+            waited_s = time.monotonic() - sent
+        assert data == beat
+        assert waited_s < 0.2
+        assert "ended on its own" not in caplog.text  # let go, not lost
+        assert relays.counters == [
+            {**relays.counters[0], "from_vehicle": 1, "from_app": 1, "faults": 0}
+        ]
+        seen = [m.get_srcSystem() for m in read_messages(tlog)]
+        assert seen == [APP_ID, VEHICLE_ID]
         # closed: its sockets are gone
-        app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", app_port))
+        app.sendto(pack(heartbeat(), APP_ID), ("127.0.0.1", port))
         vehicle.settimeout(0.3)
         with pytest.raises(TimeoutError):
             vehicle.recvfrom(4096)
     finally:
         vehicle.close()
         app.close()
+
+
+async def test_a_relay_process_that_cannot_open_a_vehicle_port_names_it() -> None:
+    taken = await Peer.open()
+    try:
+        spec = RelaySpec(UdpEndpoint("udpin", "127.0.0.1", taken.port))
+        with pytest.raises(LinkError, match=f"127.0.0.1:{taken.port}"):
+            async with RelayProcess([spec]):
+                pass
+    finally:
+        taken.close()
+
+
+async def test_a_relay_process_that_ends_on_its_own_is_reported(caplog) -> None:
+    """Killed in flight (out of memory, a crash): an error says the vehicles behind it are
+    silent from now on; leaving the block afterwards raises nothing."""
+    spec = RelaySpec(UdpEndpoint("udpin", "127.0.0.1", free_port()))
+    async with RelayProcess([spec]) as relays:
+        os.kill(relays.pid, signal.SIGKILL)
+        async with asyncio.timeout(5.0):
+            assert await relays.wait() == -signal.SIGKILL
+        assert "ended on its own (exit code -9)" in caplog.text
+        assert "silent from now on" in caplog.text
+    assert relays.counters == []
+
+
+def test_a_relay_spec_goes_through_json_unchanged() -> None:
+    spec = RelaySpec(
+        UdpEndpoint("tcpout", "10.0.0.2", 5760),
+        gcs=UdpEndpoint("udpin", "0.0.0.0", 14550),
+        gcs_index=3,
+        system_ids=frozenset({4, 7}),
+        name="relay tcpout://10.0.0.2:5760",
+    )
+    assert RelaySpec.from_json(json.loads(json.dumps(spec.to_json()))) == spec
+
+
+def test_every_connection_the_relay_can_open_gets_one_and_the_others_are_flown_directly(caplog):
+    gcs = UdpEndpoint("udpin", "0.0.0.0", 14550)
+    urls = ["udpin://0.0.0.0:14540", "serial:///dev/ttyUSB0:57600", "tcpout://127.0.0.1:5760"]
+    specs = relay_specs(urls, [0, 1, 2], gcs)
+    assert sorted(specs) == [0, 2]
+    assert specs[0] == RelaySpec(
+        UdpEndpoint("udpin", "0.0.0.0", 14540),
+        gcs=gcs,
+        gcs_index=0,
+        system_ids=frozenset({1}),
+        name="relay udpin://0.0.0.0:14540",
+    )
+    assert (specs[2].gcs_index, specs[2].system_ids) == (2, frozenset({3}))
+    assert "serial:///dev/ttyUSB0:57600 is flown directly" in caplog.text
+    # one connection for the whole team: its system ids are learned from what it carries
+    (shared,) = relay_specs(["udpin://0.0.0.0:14540"], [0, 1, 2], None).values()
+    assert (shared.gcs, shared.gcs_index, shared.system_ids) == (None, 0, frozenset())

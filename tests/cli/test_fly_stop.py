@@ -1,6 +1,7 @@
 """How ``standoff fly`` on the built-in simulator ends when it is stopped from outside: a Ctrl-C in
-its terminal holds every vehicle before the simulator stops, and a mission killed outright
-leaves no simulator behind. Both run the real command in a process of its own."""
+its terminal holds every vehicle (through the MAVLink relays) before the simulator and the
+relays stop, and a mission killed outright leaves neither behind. Both run the real command in
+a process of its own."""
 
 import contextlib
 import os
@@ -58,11 +59,17 @@ def wait_for_line(proc: subprocess.Popen[str], words: str, timeout_s: float) -> 
     raise AssertionError(f"no line with {words!r} within {timeout_s} s: {lines[-5:]}")
 
 
-def simulator_of(proc: subprocess.Popen[str]) -> int:
-    """The pid of the simulator process the mission started (its only child process)."""
-    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
-    assert len(children) == 1, children
-    return int(children[0])
+def children_of(proc: subprocess.Popen[str]) -> dict[str, int]:
+    """The processes the mission started, by role: ``simulator`` and ``relays`` (its only
+    child processes)."""
+    roles = {"app.compose.simulator": "simulator", "mavsdk.relay_process": "relays"}
+    found: dict[str, int] = {}
+    for pid in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split():
+        command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        (role,) = [r for module, r in roles.items() if module in command]
+        found[role] = int(pid)
+    assert sorted(found) == ["relays", "simulator"], found
+    return found
 
 
 def gone(pid: int, timeout_s: float) -> bool:
@@ -80,14 +87,15 @@ def gone(pid: int, timeout_s: float) -> bool:
         time.sleep(0.1)
 
 
-def stop_all(proc: subprocess.Popen[str], sim: int | None) -> None:
-    """Whatever a failed test left running: the mission, and a simulator it left behind."""
+def stop_all(proc: subprocess.Popen[str], children: dict[str, int]) -> None:
+    """Whatever a failed test left running: the mission, and what it left behind."""
     if proc.poll() is None:
         proc.kill()
         proc.communicate()
-    if sim is not None and not gone(sim, 0.0):
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(sim, signal.SIGKILL)
+    for pid in children.values():
+        if not gone(pid, 0.0):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def last_mode(tlog: Path) -> str:
@@ -105,17 +113,18 @@ def test_a_ctrl_c_in_the_terminal_holds_every_vehicle_before_the_simulator_stops
     tmp_path: Path,
 ) -> None:
     proc = start_fly(tmp_path)
-    sim: int | None = None
+    children: dict[str, int] = {}
     try:
         wait_for_line(proc, " gather ", START_TIMEOUT_S)
-        sim = simulator_of(proc)
-        # the simulator is out of the terminal's reach: a Ctrl-C there is the mission's alone
-        assert os.getsid(sim) != os.getsid(proc.pid)
+        children = children_of(proc)
+        # out of the terminal's reach: a Ctrl-C there is the mission's alone
+        for pid in children.values():
+            assert os.getsid(pid) != os.getsid(proc.pid)
         os.killpg(proc.pid, signal.SIGINT)  # what the terminal does on Ctrl-C
         _, err = proc.communicate(timeout=STOP_TIMEOUT_S)
-        assert gone(sim, 10.0)
+        assert all(gone(pid, 10.0) for pid in children.values())
     finally:
-        stop_all(proc, sim)
+        stop_all(proc, children)
     assert "standoff fly: interrupted" in err
     assert "link lost" not in err
     assert "hold on exit failed" not in err
@@ -123,14 +132,17 @@ def test_a_ctrl_c_in_the_terminal_holds_every_vehicle_before_the_simulator_stops
         assert last_mode(tmp_path / f"vehicle-{i}.tlog") == "LOITER"  # PX4's hold
 
 
-def test_a_mission_killed_outright_leaves_no_simulator_behind(tmp_path: Path) -> None:
+def test_a_mission_killed_outright_leaves_no_simulator_and_no_relays_behind(
+    tmp_path: Path,
+) -> None:
     proc = start_fly(tmp_path)
-    sim: int | None = None
+    children: dict[str, int] = {}
     try:
         wait_for_line(proc, " gather ", START_TIMEOUT_S)
-        sim = simulator_of(proc)
+        children = children_of(proc)
         proc.kill()
         proc.communicate(timeout=STOP_TIMEOUT_S)
-        assert gone(sim, 10.0)
+        assert gone(children["simulator"], 10.0)
+        assert gone(children["relays"], 10.0)
     finally:
-        stop_all(proc, sim)
+        stop_all(proc, children)

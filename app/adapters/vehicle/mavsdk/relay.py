@@ -33,15 +33,13 @@ port that cannot be bound stops the start, with the port named.
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import contextlib
 import functools
 import ipaddress
 import logging
 import socket
-import threading
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Final, Self
@@ -521,72 +519,3 @@ class MavlinkRelay:
         self._logged[what] = seen + 1
         if seen < MAX_LOGGED_FAULTS:
             log.error("%s: %s: %s (relaying goes on)", self.name, what, exc)
-
-
-class RelayThread:
-    """A thread of its own whose event loop runs the relays: a datagram is passed on as it
-    arrives, however long the mission's own loop is busy with a tick (on that loop, every
-    setpoint and every telemetry frame waited for the tick in progress: on a loaded machine the
-    vehicles answered their commands late and the agents' course-loop identifier learned a
-    gain of 0.4 /s for a loop of 1 /s). A context manager; relays are run in it by ``hosting``.
-    """
-
-    def __init__(self, name: str = "mavlink-relay") -> None:
-        self._name = name
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-
-    def __enter__(self) -> Self:
-        loop = asyncio.new_event_loop()
-        self._loop = loop
-        self._thread = threading.Thread(target=loop.run_forever, name=self._name, daemon=True)
-        self._thread.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        loop, thread = self._loop, self._thread
-        self._loop = self._thread = None
-        if loop is None or thread is None:
-            return
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(timeout=5.0)
-        if not thread.is_alive():
-            loop.close()
-
-    @contextlib.asynccontextmanager
-    async def hosting(self, relay: MavlinkRelay) -> AsyncIterator[MavlinkRelay]:
-        """``relay`` opened, run and closed in this thread's loop (one task from its opening to
-        its closing); an error opening it is raised here."""
-        loop = self._loop
-        if loop is None:
-            raise RuntimeError("RelayThread.hosting outside its 'with' block")
-        entered: concurrent.futures.Future[None] = concurrent.futures.Future()
-        stop = asyncio.Event()  # bound to the relay loop, where it is awaited and set
-
-        async def life() -> None:
-            async with relay:
-                entered.set_result(None)
-                await stop.wait()
-
-        finished = asyncio.wrap_future(asyncio.run_coroutine_threadsafe(life(), loop))
-        opened = asyncio.wrap_future(entered)
-        try:
-            await asyncio.wait({opened, finished}, return_when=asyncio.FIRST_COMPLETED)
-        except BaseException:
-            loop.call_soon_threadsafe(stop.set)
-            opened.cancel()
-            raise
-        if not entered.done():
-            opened.cancel()
-            await finished  # raises what opening the relay raised
-            raise LinkError(f"{relay.name}: closed before it opened")
-        try:
-            yield relay
-        finally:
-            loop.call_soon_threadsafe(stop.set)
-            await asyncio.shield(finished)
