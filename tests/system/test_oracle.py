@@ -224,7 +224,8 @@ def test_the_soft_maximum_trades_the_mean_for_the_largest_error():
     # One vehicle at the front of the circle, flying its tangent, as the target drives at it at
     # 7 m/s (too fast for the circle: the vehicle must swing wide behind it). Minimising the
     # eighth power of the error instead of its square gives a smaller largest error, paid for
-    # with a larger RMS.
+    # with a larger RMS. The gain is small here (12.86 m against 12.75 m; the sixteenth power over
+    # 12 m gets 12.62 m), but the two must come out in that order.
     dt, steps = 0.2, 300
     t = dt * np.arange(steps + 1)
     base = Problem(
@@ -239,7 +240,7 @@ def test_the_soft_maximum_trades_the_mean_for_the_largest_error():
     start = {"straight": np.zeros(2 * steps)}
     mean_square, _ = solve(base, start)
     soft_max, _ = solve(replace(base, dist_power=8, dist_ref_m=20.0), start)
-    assert soft_max.dist_max_m < mean_square.dist_max_m - 0.1
+    assert soft_max.dist_max_m < mean_square.dist_max_m - 0.05
     assert soft_max.dist_rms_m > mean_square.dist_rms_m
     rel = soft_max.flight.position[1:, 0] - base.target[1:]
     assert soft_max.dist_max_m == pytest.approx(
