@@ -29,7 +29,9 @@ controller that tracks the 7 m/s leg optimally, but cannot see the turn coming, 
 
 ``--worst P`` replaces the distance term by mean (|d| / 20 m)^P: with a large even P (8) a soft
 maximum, so that the oracle looks for the least *largest* distance error any controller could
-fly (``--spacing-weight 0`` leaves spacing out: a lower bound for a team that also keeps it).
+fly (``--spacing-weight 0`` leaves spacing out: a lower bound for a team that also keeps it);
+from each start it first goes down the mean square, then the power's cost, on which L-BFGS-B
+can stall far from the circle.
 ``--causal S`` also flies a receding-horizon optimiser without foresight (``causal_flight``):
 every S s it optimises the same cost over the next ``--causal-horizon`` s (30) against the
 target carried on at its present velocity, and flies the first S s of that plan on the ideal
