@@ -61,3 +61,40 @@ def test_wind_messages_decode_to_where_the_air_moves() -> None:
     assert from_west[1] == pytest.approx(0.0, abs=1e-9)
     assert telemetry.ardupilot_wind({"direction": 10.0, "speed": -1.0}) is None
     assert telemetry.ardupilot_wind({"direction": math.inf, "speed": 1.0}) is None
+
+
+@pytest.mark.parametrize(
+    ("autopilot", "config", "adapter", "only_its_own"),
+    [
+        ("px4", LinkConfig(LIMITS, autopilot="velocity"), "velocity", set()),
+        (
+            "px4",
+            LinkConfig(LIMITS, px4_offboard_loss_action=None),
+            "px4-fixed-wing",
+            {"local-position"},
+        ),
+        (
+            "arduplane",
+            LinkConfig(LIMITS, arduplane_airspeed_check=False),
+            "arduplane",
+            {"attitude"},
+        ),
+    ],
+)
+async def test_a_link_reads_only_the_messages_its_adapter_uses(
+    autopilot: str, config: LinkConfig, adapter: str, only_its_own: set[str]
+) -> None:
+    """Every message read is a call from MAVSDK's callback thread into Python: the bank
+    (ATTITUDE) is read for ArduPlane's turn fit alone, the local position for PX4's setpoints
+    alone, though the simulator streams both to every link."""
+    sim = sim_config(1, speedup=2.0, autopilot=autopilot)
+    async with (
+        asyncio.timeout(30.0),
+        running_sim(sim) as running,
+        MavsdkHub(urls_of(running), origin_of(running)) as hub,
+        hub.link(1, config) as link,
+    ):
+        assert link.autopilot_name == adapter
+        await link.wait_ready(10.0)
+        assert {"heartbeat", "position", "airspeed", "wind", "observations"} <= set(link.readers)
+        assert set(link.readers) & {"attitude", "local-position"} == only_its_own

@@ -409,7 +409,9 @@ PX4_TELEMETRY_RATES_HZ: Final[Mapping[str, float]] = {
 }
 #: what the link reads of PX4 and PX4's ``onboard`` link streams fast (mavlink_main.cpp
 #: ``configure_streams_to_default``, v1.16: ATTITUDE 100 Hz, GLOBAL_POSITION_INT, HIGHRES_IMU
-#: and ATTITUDE_QUATERNION 50, LOCAL_POSITION_NED and ODOMETRY 30, RC_CHANNELS 20)
+#: and ATTITUDE_QUATERNION 50, LOCAL_POSITION_NED and ODOMETRY 30, RC_CHANNELS 20); ATTITUDE,
+#: which the PX4 link does not read, at the mission's rate for the horizon of a ground station
+#: the relays serve
 PX4_READ_STREAMS: Final = ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE")
 #: the fast ``onboard`` streams the link never reads
 PX4_UNREAD_FAST_STREAMS: Final = ("HIGHRES_IMU", "ATTITUDE_QUATERNION", "ODOMETRY", "RC_CHANNELS")

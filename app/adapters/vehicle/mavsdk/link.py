@@ -267,6 +267,13 @@ class MavsdkVehicleLink:
         return self._require_adapter().name
 
     @property
+    def readers(self) -> tuple[str, ...]:
+        """The link's reader tasks by name ("position", "airspeed", ...; "attitude" for
+        ArduPlane, "local-position" for PX4), in the order they started."""
+        prefix = f"vehicle{self._id}-"
+        return tuple(task.get_name().removeprefix(prefix) for task in self._tasks)
+
+    @property
     def honours_speed(self) -> bool:
         return self._require_adapter().honours_speed
 
@@ -329,13 +336,17 @@ class MavsdkVehicleLink:
                 "heartbeat": self._read_heartbeat(),
                 "position": self._read_global_position(),
                 "airspeed": self._read_airspeed(),
-                "attitude": self._read_attitude(),
                 "wind": self._read_wind(name),
                 "health": self._read_health(),
                 "in-air": self._read_in_air(),
                 "observations": self._read_observations(),
                 "watchdog": self._watchdog(),
             }
+            # each message read costs a call from MAVSDK's one callback thread into Python, which
+            # waits for the interpreter while the agents step: read only what the adapter uses
+            # (the bank for ArduPlane's turn fit, the local position for PX4's setpoints)
+            if name == "arduplane":
+                readers["attitude"] = self._read_attitude()
             if name == "px4-fixed-wing":
                 readers["local-position"] = self._read_local_position()
             if self._config.timesync_period_s > 0.0:
