@@ -7,6 +7,8 @@ import json
 import os
 import signal
 import socket
+import subprocess
+import sys
 import time
 
 import pytest
@@ -495,6 +497,36 @@ async def test_a_relay_process_that_ends_on_its_own_is_reported(caplog) -> None:
         assert "ended on its own (exit code -9)" in caplog.text
         assert "silent from now on" in caplog.text
     assert relays.counters == []
+
+
+def test_a_relay_process_whose_mission_is_gone_ends_quietly() -> None:
+    """The mission killed outright: the relay process sees its input end, cannot send its
+    counters to anyone, and ends with exit code 0 and no traceback."""
+    spec = RelaySpec(UdpEndpoint("udpin", "127.0.0.1", free_port()))
+    child = subprocess.Popen(
+        [sys.executable, "-m", "app.adapters.vehicle.mavsdk.relay_process"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert child.stdin is not None
+    assert child.stdout is not None
+    assert child.stderr is not None
+    try:
+        child.stdin.write((json.dumps({"relays": [spec.to_json()]}) + "\n").encode())
+        child.stdin.flush()
+        assert "link" in json.loads(child.stdout.readline())
+        assert json.loads(child.stdout.readline()) == {"ready": True}
+        child.stdout.close()  # as a killed mission's end of the pipe
+        child.stdin.close()
+        assert child.wait(timeout=10.0) == 0
+        errors = child.stderr.read().decode()
+        assert "Traceback" not in errors
+        assert "BrokenPipeError" not in errors
+    finally:
+        child.kill()
+        child.wait()
+        child.stderr.close()
 
 
 def test_a_relay_spec_goes_through_json_unchanged() -> None:
