@@ -265,16 +265,19 @@ def resolve(
     ]
     if not near:
         return Resolution(wanted_course_rad)
-    offsets = _offsets(params)
-    east, north, t = _own_paths(
-        east_m,
-        north_m,
-        course_rad,
-        max(speed_m_s, 0.0),
-        wanted_course_rad + offsets,
-        max_rate_rad_s,
-        params,
-    )
+    offsets = _offsets(params)  # offsets[0] == 0: the wanted course first
+
+    def paths(targets_rad: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return _own_paths(
+            east_m, north_m, course_rad, max(speed_m_s, 0.0), targets_rad, max_rate_rad_s, params
+        )
+
+    # the wanted course alone decides for a teammate that is far enough on it, or stacked
+    # vertically apart (held so by the band); the other courses are flown out only for a
+    # teammate that threatens (in a formed team of twenty on a 35 m altitude stack, its
+    # neighbours in height are near, but never a threat)
+    east_w, north_w, t = paths(wanted_course_rad + offsets[:1])
+    every: tuple[FloatArray, FloatArray] | None = None
     horizontal = np.full(offsets.shape, math.inf)
     min_up = max_up = None
     threat: int | None = None
@@ -282,11 +285,9 @@ def resolve(
     worst_on_wanted = math.inf
     acted: set[int] = set()
     for other in near:
-        apart = _horizontal(east, north, t, other)
         now = math.hypot(east_m - other.east_m, north_m - other.north_m)
-        d = np.minimum(apart.min(axis=1), now)
         dz = 0.0 if other.up_m is None else other.up_m - up_m
-        wanted = float(d[0])
+        wanted = min(float(_horizontal(east_w, north_w, t, other).min()), now)
         closest = min(closest, math.hypot(wanted, dz))
         hysteresis = params.hysteresis_m if other.vehicle in acted_on else 0.0
         if wanted >= guard + hysteresis:
@@ -302,6 +303,11 @@ def resolve(
                 min_up = floor if min_up is None else max(min_up, floor)
         if abs(dz) >= params.min_distance_m:
             continue  # vertically separated, and kept so by the band
+        if every is None:
+            east, north, _ = paths(wanted_course_rad + offsets)
+            every = (east, north)
+        apart = _horizontal(every[0], every[1], t, other)
+        d = np.minimum(apart.min(axis=1), now)
         parting = _parting(up_m, climb_m_s, level_up_m, other, t, params)
         if parting is not None:
             # in three dimensions, each step safe once the climb has parted the pair
