@@ -9,7 +9,7 @@ with defaults, so callers that do not know them keep working.
 """
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Literal
 
@@ -34,6 +34,7 @@ from app.core.guidance.orbit_plan import (
     planned_orbit_axes,
 )
 from app.core.plant import VehicleEnvelope, require_positive
+from app.core.values import replace
 
 GuidanceLaw = Literal["proposed", "frew", "fixed"]
 PhaseLaw = Literal["paper", "frew", "none"]

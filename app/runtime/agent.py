@@ -22,7 +22,7 @@ import asyncio
 import logging
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from app.core.agent import (
     ActuatorChoice,
@@ -36,6 +36,7 @@ from app.core.agent import (
 from app.core.estimation.backlog import merge_backlog
 from app.core.estimation.messages import Observation
 from app.core.mission import agent as logic
+from app.core.values import replace
 from app.errors import LinkError
 from app.runtime.ports import messages as bus
 from app.runtime.ports import topics

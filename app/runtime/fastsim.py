@@ -10,7 +10,7 @@ spacing) are pure functions of the result.
 import math
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,7 @@ from app.core.phase import orbit_order, phase_time_lower_bound
 from app.core.plant import FixedWingState, VehicleEnvelope, heading_for_ground_course, step
 from app.core.sampled_run import FloatArray, SimulationResult
 from app.core.target import TargetMotion
+from app.core.values import replace
 
 
 @dataclass(frozen=True, slots=True)

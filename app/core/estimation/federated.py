@@ -28,7 +28,7 @@ In every mode with feedback the local filters run with Q_i = beta_i^-1 Q_g.
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -39,6 +39,7 @@ from app.core.estimation.linalg import robust_cholesky, symmetrise
 from app.core.estimation.local import LocalParams, LocalState, local_step
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
 from app.core.estimation.models import MotionModel
+from app.core.values import replace
 
 FloatArray = NDArray[np.float64]
 

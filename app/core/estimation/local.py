@@ -25,7 +25,7 @@ covariance grows with the process noise.
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from app.core.estimation.imm import IMMParams, IMMState, imm_init, imm_predict, imm_update
 from app.core.estimation.messages import LocalEstimate, Observation
 from app.core.estimation.models import POS, STATE_DIM
+from app.core.values import replace
 
 FloatArray = NDArray[np.float64]
 

@@ -10,7 +10,7 @@ one IMM-UKF that sees every observation.
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +31,7 @@ from app.core.estimation.local import (
     local_step,
 )
 from app.core.estimation.messages import GlobalEstimate, Observation
+from app.core.values import replace
 
 FloatArray = NDArray[np.float64]
 

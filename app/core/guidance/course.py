@@ -6,11 +6,12 @@ target.
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from app.core.frames import wrap_pi
 from app.core.guidance.field import FieldParams, check_finite, course_and_rate, peak_curvature
 from app.core.plant import VehicleEnvelope, advance
+from app.core.values import replace
 
 
 @dataclass(frozen=True, slots=True)

@@ -58,11 +58,12 @@ and k's relative standard error is below ``max_rel_se``; k is kept within [``min
 import bisect
 import itertools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from app.core.frames import wrap_pi
 from app.core.plant import VehicleEnvelope
+from app.core.values import replace
 
 _MIN_GAIN, _MAX_GAIN = 0.2, 3.0  # 1/s: the default bounds of k
 _DEFAULT_DELAYS_S = tuple(round(0.1 * i, 1) for i in range(11))

@@ -4,10 +4,11 @@ to it, and the ground-speed cap that keeps the turns along it within the course-
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from app.core.frames import TAU, wrap_pi
 from app.core.guidance.field import FieldParams, check_finite, course_and_rate
+from app.core.values import replace
 
 
 @dataclass(frozen=True, slots=True)

@@ -33,7 +33,7 @@ state (``MissionAgentState.estimates``, ``.statuses``).
 import functools
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -72,6 +72,7 @@ from app.core.mission.separation import SeparationParams, Traffic, resolve
 from app.core.mission.stage import Stage
 from app.core.mission.team import dead_reckon
 from app.core.phase import circle_ground_speed_in_wind
+from app.core.values import replace
 
 FloatArray = NDArray[np.float64]
 

@@ -16,7 +16,7 @@ is part of the state (``GroundState.ticks``, ``.announcements``).
 """
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -35,6 +35,7 @@ from app.core.mission.schedule import Every
 from app.core.mission.stage import Stage, StageParams, StageState, TeamView, next_stage
 from app.core.mission.team import TeamSample, VehicleSample, dead_reckon
 from app.core.target import TargetMotion
+from app.core.values import replace
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,7 +1,9 @@
 """When a periodic message is due, in mission time: the schedule lives in the state it paces."""
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+
+from app.core.values import replace
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,13 +8,14 @@ Pure: time is an argument, the state is a frozen value.
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.core.frames import TAU
+from app.core.values import replace
 
 
 class Stage(StrEnum):
