@@ -277,6 +277,33 @@ async def test_many_subscribers_each_get_every_message(harness: Harness) -> None
             await sub.close()
 
 
+async def test_who_gets_a_topic_follows_the_subscriptions_as_they_change(
+    harness: Harness,
+) -> None:
+    # the in-process broker remembers each topic's receivers: a filter or a client that comes
+    # or goes after a topic's first message must change who gets the next one
+    async with harness.open() as pub, harness.open() as a, Fence(a, pub) as fence:
+        async with a.subscribe(topics.observation(1)) as first:
+            await pub.publish(topics.observation(1), observation(1.0, vehicle=1))
+            await fence.settle()
+            async with a.subscribe(topics.ALL_OBSERVATIONS) as wider:
+                await pub.publish(topics.observation(1), observation(2.0, vehicle=1))
+                await fence.settle()
+                assert [m.t_s for _, m in await take(wider, 1)] == [2.0]
+                async with harness.open() as b, b.subscribe(topics.observation(1)) as late:
+                    await pub.publish(topics.observation(1), observation(3.0, vehicle=1))
+                    await fence.settle()
+                    assert [m.t_s for _, m in await take(late, 1)] == [3.0]
+                assert b.stats.delivered == 1
+            await pub.publish(topics.observation(1), observation(4.0, vehicle=1))
+            await fence.settle()
+            assert [m.t_s for _, m in await take(first, 4)] == [1.0, 2.0, 3.0, 4.0]
+            assert [m.t_s async for _, m in wider] == [3.0]
+        await pub.publish(topics.observation(1), observation(5.0, vehicle=1))
+        await fence.settle()
+        assert a.stats.delivered == 4 + 2 + fence.count  # first's, wider's and the fences'
+
+
 async def test_closed_subscription_ends_and_gets_nothing_more(harness: Harness) -> None:
     async with harness.open() as pub, harness.open() as sub_bus, Fence(sub_bus, pub) as fence:
         keep = sub_bus.subscribe(topics.ALL_STATUS)

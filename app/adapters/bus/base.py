@@ -26,6 +26,7 @@ import abc
 import asyncio
 import collections
 import dataclasses
+import functools
 import logging
 from collections.abc import Iterable, Mapping
 from types import TracebackType
@@ -119,6 +120,12 @@ later."""
 
 class BusClosed(BusError):
     """The bus is not open (not entered yet, or already closed)."""
+
+
+@functools.lru_cache(maxsize=4096)  # a mission has a few dozen topics; any flood is bounded
+def _topic(name: str) -> Topic:
+    """``Topic(name)``, checked once per name (a Topic is frozen: one is shared)."""
+    return Topic(name)
 
 
 def _decode(
@@ -270,6 +277,11 @@ class Bus(abc.ABC):
     def is_open(self) -> bool:
         return self._open
 
+    @property
+    def topic_filters(self) -> tuple[TopicFilter, ...]:
+        """The filters this client has subscriptions on, now."""
+        return tuple(self._subscriptions)
+
     async def __aenter__(self) -> Self:
         if self._open:
             raise BusError(f"bus {self.client_id!r} is already open")
@@ -411,7 +423,7 @@ class Bus(abc.ABC):
                 return
             payload, counter = opened.payload, opened.counter
         try:
-            topic = Topic(topic_name)
+            topic = _topic(topic_name)
             message = _decode(payload, decoded)
         except codec.UnsupportedVersion as exc:
             self._drop(WRONG_VERSION, "?", topic_name, exc)

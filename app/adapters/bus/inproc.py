@@ -20,6 +20,7 @@ from app.runtime.ports.topics import Topic, TopicFilter
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
+_MAX_ROUTES = 4096  # topic names whose receivers a broker remembers
 
 
 class InProcessBroker:
@@ -32,16 +33,38 @@ class InProcessBroker:
         self._clients: list[InProcessBus] = []
         self._retained: dict[str, bytes] = {}
         self._share_decoded = share_decoded
+        # per topic name, the clients with filters that match it and those filters, worked
+        # out on the first payload and forgotten whenever a client or a filter comes or goes
+        self._routes: dict[str, list[tuple[InProcessBus, tuple[TopicFilter, ...]]]] = {}
 
     def _join(self, client: InProcessBus) -> None:
         self._clients.append(client)
+        self._routes.clear()
 
     def _leave(self, client: InProcessBus) -> None:
         if client in self._clients:
             self._clients.remove(client)
+        self._routes.clear()
+
+    def _filters_changed(self) -> None:
+        self._routes.clear()
+
+    def _route_of(self, topic: str) -> list[tuple[InProcessBus, tuple[TopicFilter, ...]]]:
+        route = self._routes.get(topic)
+        if route is None:
+            if len(self._routes) >= _MAX_ROUTES:  # a flood of topic names stays bounded
+                self._routes.clear()
+            route = []
+            for client in self._clients:
+                matched = tuple(f for f in client.topic_filters if f.matches(topic))
+                if matched:
+                    route.append((client, matched))
+            self._routes[topic] = route
+        return route
 
     def route(self, topic: str, payload: bytes, *, retain: bool = False) -> None:
-        """Hand a payload to every client; each decodes what it has subscribed to. A retained
+        """Hand a payload to every client that has subscribed to its topic (the matching is
+        done here, once per topic name, not by every client for every payload). A retained
         payload is also kept for later subscribers (an empty one clears the topic's)."""
         if retain:
             if payload:
@@ -51,8 +74,8 @@ class InProcessBroker:
         decoded: dict[bytes, Message | MalformedMessage] | None = (
             {} if self._share_decoded else None
         )
-        for client in list(self._clients):
-            client._ingest(topic, payload, decoded=decoded)
+        for client, filters in self._route_of(topic):
+            client._ingest(topic, payload, filters, decoded=decoded)
 
     def retained(self, topic_filter: TopicFilter) -> list[tuple[str, bytes]]:
         """The retained payloads on the topics ``topic_filter`` matches."""
@@ -108,11 +131,12 @@ class InProcessBus(Bus):
         return True
 
     async def _add_filter(self, topic_filter: TopicFilter) -> None:
+        self.broker._filters_changed()
         for topic, payload in self.broker.retained(topic_filter):
             self._ingest(topic, payload, [topic_filter])
 
     async def _remove_filter(self, topic_filter: TopicFilter) -> None:
-        return None
+        self.broker._filters_changed()
 
     def inject_raw(self, topic: str, payload: bytes) -> None:
         """Route raw bytes as if a foreign client had published them (fault injection)."""
