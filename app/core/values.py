@@ -4,9 +4,10 @@ A step returns a new value (style rule 2), so the agent's step replaces its 31-f
 about ten times per control tick. ``dataclasses.replace`` walks the class's fields and goes
 through ``__init__`` on every call: about 11 us for that state on a 2-core EPYC. For a frozen
 value with slots and no ``__post_init__`` (nothing to re-check), ``replace`` here copies
-the slots with a function written once per class: about 4.5 us. Every other class
-(validated parameters, fields left out of ``__init__``) goes to ``dataclasses.replace`` as
-before, so the outcome is the same value either way (``tests/core/test_values.py``).
+the slots with a function written once per class: about 4.5 us. A field left out of
+``__init__`` is not copied but set as ``__init__`` sets it (a cache starts empty again).
+Every other class (validated parameters) goes to ``dataclasses.replace`` as before, so the
+outcome is the same value either way (``tests/core/test_values.py``).
 """
 
 import dataclasses
@@ -45,11 +46,9 @@ def _replacer_for(cls: type) -> _Replacer:
     if not dataclasses.is_dataclass(cls) or "__slots__" not in cls.__dict__:
         return _by_dataclasses
     fields = dataclasses.fields(cls)
-    if hasattr(cls, "__post_init__") or any(
-        not f.init or f.name not in cls.__dict__ for f in fields
-    ):
+    if hasattr(cls, "__post_init__") or any(f.name not in cls.__dict__ for f in fields):
         return _by_dataclasses
-    names = tuple(f.name for f in fields)
+    names = tuple(f.name for f in fields if f.init)
     # member descriptors set a slot directly, past the frozen class's __setattr__
     scope: dict[str, Any] = {"_new": object.__new__, "_cls": cls, "_names": frozenset(names)}
     lines = [
@@ -58,9 +57,18 @@ def _replacer_for(cls: type) -> _Replacer:
         "        _unknown(changes)",
         "    new = _new(_cls)",
     ]
-    for i, name in enumerate(names):
-        scope[f"_set{i}"] = cls.__dict__[name].__set__
-        lines.append(f"    _set{i}(new, changes[{name!r}] if {name!r} in changes else obj.{name})")
+    for i, f in enumerate(fields):
+        scope[f"_set{i}"] = cls.__dict__[f.name].__set__
+        if f.init:
+            lines.append(
+                f"    _set{i}(new, changes[{f.name!r}] if {f.name!r} in changes else obj.{f.name})"
+            )
+        elif f.default is not dataclasses.MISSING:  # as __init__ leaves it: not copied
+            scope[f"_default{i}"] = f.default
+            lines.append(f"    _set{i}(new, _default{i})")
+        elif f.default_factory is not dataclasses.MISSING:
+            scope[f"_factory{i}"] = f.default_factory
+            lines.append(f"    _set{i}(new, _factory{i}())")
     lines.append("    return new")
 
     def unknown(changes: dict[str, Any]) -> None:

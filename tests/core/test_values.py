@@ -2,12 +2,15 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from app.config import load_config
 from app.config.mission import MissionConfig
 from app.config.plan import build_plan
 from app.core import values
+from app.core.estimation.imm import default_imm_params, imm_init
+from app.core.estimation.local import LocalState
 from app.core.mission.agent import JoinPath, MissionAgentState, initial_agent_state
 from app.core.mission.schedule import Every
 from app.core.values import replace
@@ -63,3 +66,21 @@ def test_a_class_that_checks_itself_is_still_checked() -> None:
     assert replace(every, period_s=2.0).period_s == 2.0
     with pytest.raises(ValueError):
         replace(every, period_s=-1.0)
+
+
+def test_a_cached_estimate_is_not_carried_into_a_copy_with_another_filter_state() -> None:
+    params = default_imm_params()
+    first = LocalState("1", imm_init(1.0, np.zeros(6), np.eye(6), params))
+    moved = imm_init(2.0, np.array([5.0, 1.0, -3.0, 0.0, 0.0, 0.0]), np.eye(6), params)
+    before = first.estimate()
+    assert before is not None
+    assert first.estimate() is before  # worked out once per state
+    second = replace(first, imm=moved)
+    after = second.estimate()
+    assert after is not None
+    assert after.t_s == 2.0
+    np.testing.assert_allclose(after.x, moved.x[0])
+    assert first.estimate() is before
+    # a field left out of __init__ starts as __init__ leaves it, on both ways of copying
+    assert dataclasses.replace(first, imm=moved) == second
+    assert second.consecutive_gated == first.consecutive_gated

@@ -90,7 +90,7 @@ def robust_cholesky(p: FloatArray) -> FloatArray:
 
 def is_spd(p: FloatArray) -> bool:
     """True when ``p`` (n, n) is finite, symmetric to 1e-9 relative, and Cholesky-factorisable."""
-    if not np.all(np.isfinite(p)):
+    if not np.isfinite(p).all():
         return False
     scale = max(float(np.max(np.abs(p))), 1e-300)
     if float(np.max(np.abs(p - p.T))) > 1e-9 * scale:

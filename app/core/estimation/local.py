@@ -26,7 +26,7 @@ covariance grows with the process noise.
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,8 @@ FloatArray = NDArray[np.float64]
 
 RECENT_KEPT = 20
 """How many used observations a local filter keeps for replay after a late allocation."""
+
+_NOT_YET = object()  # LocalState's estimate, before it is first asked for
 
 Outcome = Literal["initialised", "updated", "late", "stale", "invalid", "gated", "restarted"]
 
@@ -146,6 +148,9 @@ class LocalState:
     consecutive_gated: int = 0
     recent: tuple[Observation, ...] = ()
     alloc_t_s: float | None = None
+    # ``estimate()``, worked out on first use: the agent asks for it on every control tick
+    # and status while the state changes only with an observation (not copied by replace)
+    _estimate: object = field(default=_NOT_YET, init=False, repr=False, compare=False)
 
     @property
     def t_s(self) -> float | None:
@@ -154,11 +159,18 @@ class LocalState:
     def estimate(self) -> LocalEstimate | None:
         """The message for the main filter (combined IMM output), or None before any data and
         while the track is non-finite (until ``local_step`` restarts it)."""
+        known = self._estimate
+        if known is _NOT_YET:
+            known = self._combined()
+            object.__setattr__(self, "_estimate", known)
+        return cast(LocalEstimate | None, known)
+
+    def _combined(self) -> LocalEstimate | None:
         if self.imm is None:
             return None
         imm = self.imm
         x, p = imm.combined()
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(p))):
+        if not (np.isfinite(x).all() and np.isfinite(p).all()):
             return None
         return LocalEstimate(
             self.sensor,
@@ -303,12 +315,12 @@ def _diverged(imm: IMMState, params: LocalParams) -> str:
     """Why the track is beyond use (empty string: it is not): non-finite, or a position or
     its standard deviation beyond ``max_abs_position_m``."""
     x, p, mu = imm.x, imm.p, imm.mu
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(p)) and np.all(np.isfinite(mu))):
+    if not (np.isfinite(x).all() and np.isfinite(p).all() and np.isfinite(mu).all()):
         return "track diverged: non-finite state or covariance"
     limit = params.max_abs_position_m
-    if not np.all(np.abs(x[:, POS]) <= limit):
+    if not np.abs(x[:, POS]).max() <= limit:
         return f"track diverged: position beyond {limit:g} m"
-    if not np.all(p[:, POS, POS] <= limit * limit):
+    if not p[:, POS, POS].max() <= limit * limit:
         return f"track diverged: position uncertainty beyond {limit:g} m"
     return ""
 

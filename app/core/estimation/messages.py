@@ -45,7 +45,7 @@ def _array(raw: Mapping[str, Any], key: str, kind: str, shape: tuple[int, ...]) 
         raise InputError(f"{kind}: field {key!r} is not numeric: {exc}") from exc
     if value.shape != shape:
         raise InputError(f"{kind}: field {key!r} must have shape {shape}, got {value.shape}")
-    if not np.all(np.isfinite(value)):
+    if not np.isfinite(value).all():
         raise InputError(f"{kind}: field {key!r} has non-finite entries")
     value.setflags(write=False)
     return value

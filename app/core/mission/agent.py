@@ -249,8 +249,9 @@ class JoinPath:
         """The path with its progress moved to the point nearest (east, north), searched up
         to 200 m ahead of the last one, and the distance to it (m)."""
         pts = self.points
-        window = range(self.progress, min(len(pts) - 1, self.progress + 100) + 1)
-        k = min(window, key=lambda i: (pts[i][0] - east_m) ** 2 + (pts[i][1] - north_m) ** 2)
+        ahead = pts[self.progress : min(len(pts) - 1, self.progress + 100) + 1]
+        squares = [(p[0] - east_m) ** 2 + (p[1] - north_m) ** 2 for p in ahead]
+        k = self.progress + squares.index(min(squares))  # the first of equals, as min's
         off = math.hypot(pts[k][0] - east_m, pts[k][1] - north_m)
         return (self if k == self.progress else replace(self, progress=k)), off
 
@@ -391,16 +392,16 @@ def check_fused(state: MissionAgentState, fused: GlobalEstimate, params: Mission
     x, p = np.asarray(fused.x), np.asarray(fused.p)
     if x.shape != (6,) or p.shape != (6, 6):
         return f"state of shape {x.shape}, covariance {p.shape}"
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(p))):
+    if not (np.isfinite(x).all() and np.isfinite(p).all()):
         return "non-finite state or covariance"
-    if not np.all(np.abs(x) <= params.local.max_abs_position_m):
+    if not np.abs(x).max() <= params.local.max_abs_position_m:
         return f"state beyond {params.local.max_abs_position_m:g}"
     moments = (fused.mu, fused.model_x, fused.model_p)
     if any(m is not None for m in moments):
         r = len(params.local.imm.models)
         shapes = [np.shape(m) if m is not None else None for m in moments]
         if shapes != [(r,), (r, 6), (r, 6, 6)] or not all(
-            np.all(np.isfinite(m)) for m in moments if m is not None
+            np.isfinite(m).all() for m in moments if m is not None
         ):
             return f"per-model moments that are not of this agent's {r} models"
     local = state.local.estimate()

@@ -223,11 +223,7 @@ def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParam
     """Why the station does not take local estimate ``estimate`` into the fusion (empty
     string: it does): the wrong shape, non-finite, or an outlier against the live fusion."""
     x, p = np.asarray(estimate.x), np.asarray(estimate.p)
-    if (
-        x.shape != (6,)
-        or p.shape != (6, 6)
-        or not (np.all(np.isfinite(x)) and np.all(np.isfinite(p)))
-    ):
+    if x.shape != (6,) or p.shape != (6, 6) or not (np.isfinite(x).all() and np.isfinite(p).all()):
         return "state or covariance of the wrong shape or non-finite"
     if not np.all(np.abs(x) <= params.max_abs_state):
         return f"state beyond {params.max_abs_state:g}: a diverged track"
@@ -238,7 +234,7 @@ def check_local(state: GroundState, estimate: LocalEstimate, params: GroundParam
         shapes = [np.shape(m) if m is not None else None for m in moments]
         if shapes != [(r,), (r, 6), (r, 6, 6)]:
             return f"per-model moments {shapes} that are not the main filter's {r} models"
-        if not all(np.all(np.isfinite(m)) for m in moments if m is not None):
+        if not all(np.isfinite(m).all() for m in moments if m is not None):
             return "non-finite per-model moments"
     fused = state.fused
     live = estimate.t_s - state.last_taken_t_s <= params.coast_after_s
