@@ -13,16 +13,26 @@ from app.runtime.ports import messages as bus
 
 
 def _nested(a: Any) -> Any:
-    return tuple(_nested(v) for v in a) if isinstance(a, list) else float(a)
+    """An array's values as nested tuples of Python floats (what the messages' fields hold)."""
+    array = np.asarray(a, dtype=np.float64)
+    return _tuples(array.tolist(), array.ndim)
+
+
+def _tuples(values: Any, ndim: int) -> Any:
+    if ndim <= 1:
+        return tuple(values) if ndim == 1 else values
+    if ndim == 2:
+        return tuple(map(tuple, values))
+    return tuple(_tuples(v, ndim - 1) for v in values)
 
 
 def _models(mu: Any, model_x: Any, model_p: Any) -> dict[str, Any]:
     if mu is None or model_x is None or model_p is None:
         return {}
     return {
-        "mu": _nested(np.asarray(mu).tolist()),
-        "model_x": _nested(np.asarray(model_x).tolist()),
-        "model_P": _nested(np.asarray(model_p).tolist()),
+        "mu": _nested(mu),
+        "model_x": _nested(model_x),
+        "model_P": _nested(model_p),
     }
 
 
@@ -51,8 +61,8 @@ def local_to_bus(estimate: est.LocalEstimate, vehicle: int, sender: str) -> bus.
         sender=sender,
         t_s=estimate.t_s,
         vehicle=vehicle,
-        x=_nested(estimate.x.tolist()),
-        P=_nested(estimate.p.tolist()),
+        x=_nested(estimate.x),
+        P=_nested(estimate.p),
         q_scale=estimate.q_scale,
         alloc_t_s=estimate.alloc_t_s,
         **_models(estimate.mu, estimate.model_x, estimate.model_p),
@@ -77,8 +87,8 @@ def global_to_bus(estimate: est.GlobalEstimate, sender: str) -> bus.GlobalEstima
     return bus.GlobalEstimate(
         sender=sender,
         t_s=estimate.t_s,
-        x=_nested(estimate.x.tolist()),
-        P=_nested(estimate.p.tolist()),
+        x=_nested(estimate.x),
+        P=_nested(estimate.p),
         beta={int(sensor): share for sensor, share in estimate.beta if share > 0.0},
         included_t_s={int(sensor): t for sensor, t in estimate.included_t_s} or None,
         **_models(estimate.mu, estimate.model_x, estimate.model_p),

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from app.adapters.bus import MalformedMessage, UnsupportedVersion, decode, encode
+from app.adapters.bus import MalformedMessage, UnsupportedVersion, codec, decode, encode
 from app.runtime.ports import topics
 from app.runtime.ports.messages import (
     MESSAGE_TYPES,
@@ -303,6 +303,25 @@ def test_a_nesting_bomb_is_malformed_not_a_recursion_error(payload: bytes) -> No
 def test_brackets_inside_strings_do_not_count_as_nesting() -> None:
     status = OK.model_copy(update={"detail": '[[[[[[[[[[[[ {{{{{{{{{{ \\" [[[[[[[['})
     assert decode(encode(status)) == status
+
+
+@settings(max_examples=3000, deadline=None)
+@given(
+    st.lists(st.sampled_from([b"[", b"]", b"{", b"}", b'"', b"\\", b"a", b",", b"1"]), max_size=60),
+    st.sampled_from([0, 1, 2, 3, 8]),
+)
+def test_the_depth_of_the_brackets_alone_is_the_depth_scanned_one_by_one(
+    pieces: list[bytes], limit: int
+) -> None:
+    # nesting_depth takes the strings out and the brackets' levels off in C; where they do not
+    # pair up it scans them one by one: either way the answer is the scan's
+    payload = b"".join(pieces)
+    scanned = (
+        codec._scanned_depth(payload, limit)
+        if payload.count(b"[") + payload.count(b"{") > limit
+        else 0
+    )
+    assert codec.nesting_depth(payload, limit) == scanned
 
 
 def test_the_deepest_message_passes_the_depth_bound() -> None:
