@@ -7,7 +7,7 @@ from contextlib import aclosing
 from typing import Any
 
 import pytest
-from mavsdk.asyncio import MavsdkConnectionError
+from mavsdk.exceptions import ConnectionError as MavsdkConnectionError
 from mavsdk.plugins.action import ActionError, ActionResult
 
 from app.adapters.vehicle.autopilots.limits import SetpointLimits

@@ -59,7 +59,7 @@ class AccelerationOffboardPort(OffboardPort, Protocol):
 
 
 class CommandPort(Protocol):
-    """MavlinkDirectAsync.send_command: a COMMAND_LONG/COMMAND_INT in, its final ack out."""
+    """MavlinkDirect's send_command: a COMMAND_LONG/COMMAND_INT in, its final ack out."""
 
     async def send_command(self, command: MavlinkMessage) -> MavlinkMessage: ...
 

@@ -25,14 +25,15 @@ from dataclasses import dataclass, field, replace
 from types import TracebackType
 from typing import Any
 
-from mavsdk.asyncio import MavsdkError, System
+from mavsdk import System
+from mavsdk.asyncio import MavsdkError
+from mavsdk.asyncio import System as AsyncSystem
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
-from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.autopilot import Autopilot
-from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
+from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkDirectError, MavlinkMessage
+from mavsdk.plugins.offboard import Offboard
 from pymavlink.dialects.v20 import common as mavlink
 
 from app.adapters.vehicle.autopilots.arduplane import ArduPlaneAdapter
@@ -49,6 +50,7 @@ from app.adapters.vehicle.autopilots.velocity import VelocityAdapter
 from app.adapters.vehicle.mavsdk import telemetry
 from app.adapters.vehicle.mavsdk.broadcast import Broadcast, Subscription
 from app.adapters.vehicle.mavsdk.clockmap import BootClockMap, Rebase
+from app.adapters.vehicle.mavsdk.direct import LoopInbox, LoopMavlinkDirect, LoopOffboard
 from app.adapters.vehicle.mavsdk.timesync import LinkDelay, follow
 from app.errors import LinkError
 from app.runtime.ports.vehicle import (
@@ -197,7 +199,8 @@ class MavsdkVehicleLink:
     ``clock`` is the host's monotonic clock (link silence, frame age); ``mission_clock`` reads
     mission time on the host (``app.runtime.ports.clock.MissionClock``): given, every frame is
     stamped with its boot time mapped onto it; None (or while it returns None: its epoch is not
-    known yet), with the vehicle's own boot time.
+    known yet), with the vehicle's own boot time. ``inbox`` hands the subscribed messages to the
+    loop (the hub's, shared by its links; None: one of the link's own).
     """
 
     def __init__(
@@ -209,8 +212,11 @@ class MavsdkVehicleLink:
         clock: Callable[[], float] = time.monotonic,
         gcs_system_id: int = MAVSDK_GCS_SYSTEM_ID,
         mission_clock: Callable[[], float | None] | None = None,
+        *,
+        inbox: LoopInbox | None = None,
     ) -> None:
         self._system = system
+        self._inbox = inbox
         self._mission_clock = mission_clock
         self._boot_clock = BootClockMap(config.clock_window_s, config.clock_reset_s)
         self._delay = LinkDelay()
@@ -309,17 +315,19 @@ class MavsdkVehicleLink:
     async def __aenter__(self) -> MavsdkVehicleLink:
         async with AsyncExitStack() as stack:
             try:
-                self._tel = TelemetryAsync(self._system)
-                self._action = ActionAsync(self._system)
-                self._offboard_plugin = OffboardAsync(self._system)
-                self._direct = MavlinkDirectAsync(self._system)
-                self._param = ParamAsync(self._system)
-                autopilot = await self._system.autopilot_type()
-                vehicle = await self._system.vehicle_type()
+                system = AsyncSystem(self._system)
+                inbox = self._inbox or LoopInbox(asyncio.get_running_loop())
+                self._tel = TelemetryAsync(system)
+                self._action = ActionAsync(system)
+                self._offboard_plugin = LoopOffboard(Offboard(self._system))
+                self._direct = LoopMavlinkDirect(MavlinkDirect(self._system), inbox)
+                self._param = ParamAsync(system)
+                autopilot = self._system.autopilot_type()
+                vehicle = self._system.vehicle_type()
                 if self._config.autopilot is None and autopilot in GENERIC_AUTOPILOTS:
                     await self._first_heartbeat()
-                    autopilot = await self._system.autopilot_type()
-                    vehicle = await self._system.vehicle_type()
+                    autopilot = self._system.autopilot_type()
+                    vehicle = self._system.vehicle_type()
             except (MavsdkError, RuntimeError) as exc:
                 raise LinkError(f"vehicle {self._id}: cannot open its plugins: {exc}") from exc
             name = choose_autopilot(autopilot, vehicle, self._config.autopilot, self._id)
