@@ -5,20 +5,24 @@ Run:  .venv/bin/python -m benchmarks.bench_mavsdk_calls [--vehicles N] [--second
 
 The built-in simulator (``standoff sitl``, a process of its own, so that its CPU is not counted)
 flies N vehicles at real time. This process connects to them with MAVSDK and, for each vehicle,
-does what a mission's link does all flight long: it reads GLOBAL_POSITION_INT, VFR_HUD and
-HEARTBEAT through MavlinkDirect and sends a velocity setpoint at 10 Hz. It does that for S
-seconds through MAVSDK's asyncio wrappers (``OffboardAsync``, ``MavlinkDirectAsync``: a pool
+does what a mission's link and agent do all flight long: it reads GLOBAL_POSITION_INT, VFR_HUD
+and HEARTBEAT through MavlinkDirect and answers each position with a tick of CPU (``--tick-ms``,
+an agent's median tick) and a velocity setpoint. It does that for S seconds through MAVSDK's
+asyncio wrappers (``OffboardAsync``, ``MavlinkDirectAsync``: a pool
 thread per call, a loop wake-up per message), then for S seconds on the loop (the setpoint made
 on the loop, the messages through one ``LoopInbox``), R times in turn. Printed per phase: the
-process's CPU (all its threads: the pool's and MAVSDK's too) as a share of one core, per
-vehicle, the messages read and setpoints sent, and the loop wake-ups the messages took; then
-the ratio of the two ways' CPU.
+process's CPU (all its threads: the pool's and MAVSDK's too) as a share of one core, the same
+without the ticks per vehicle (the link's own cost), the messages read and setpoints sent, the
+loop wake-ups the messages took, and how late the positions reached the reader (host arrival
+against the vehicle's boot time, above each vehicle's least: the spread of the delivery delay);
+then the ratio of the two ways' CPU without the ticks.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import math
 import subprocess
 import sys
@@ -28,6 +32,7 @@ from contextlib import aclosing
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from mavsdk import ComponentType, Configuration, ForwardingOption, Mavsdk, System
 from mavsdk.asyncio import System as AsyncSystem
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
@@ -40,7 +45,6 @@ from app.adapters.vehicle.mavsdk.logs import route_mavsdk_logs
 from sitl.ports import find_free_udp_base_port
 
 MESSAGES = ("GLOBAL_POSITION_INT", "VFR_HUD", "HEARTBEAT")
-SETPOINT_PERIOD_S = 0.1
 
 
 @dataclass
@@ -51,6 +55,7 @@ class Phase:
     messages: int
     setpoints: int
     wakeups: int | None
+    late_s: list[float]
 
 
 class Plugins:
@@ -79,38 +84,47 @@ def on_loop(system: System, inbox: LoopInbox) -> Plugins:
     return Plugins(direct.subscribe_message, offboard.set_velocity_ned, (offboard, direct))
 
 
-async def fly_phase(plugins: list[Plugins], seconds: float) -> tuple[int, int]:
-    """Read the messages and send the setpoints for ``seconds``; the counts of both."""
+def busy(seconds: float) -> None:
+    """Hold the loop for ``seconds`` of CPU, as an agent's tick does."""
+    end = time.process_time() + seconds
+    while time.process_time() < end:
+        pass
+
+
+async def fly_phase(
+    plugins: list[Plugins], seconds: float, tick_s: float
+) -> tuple[int, int, list[float]]:
+    """Read the messages for ``seconds``, answering each vehicle's GLOBAL_POSITION_INT with a
+    tick of ``tick_s`` and a setpoint; the counts of messages and setpoints, and each
+    position's lateness (its host arrival against its boot time, above the vehicle's least)."""
     counts = {"messages": 0, "setpoints": 0}
+    offsets: list[list[float]] = [[] for _ in plugins]
 
-    async def read(vehicle: Plugins, name: str) -> None:
+    async def read(i: int, name: str) -> None:
+        vehicle = plugins[i]
         async with aclosing(vehicle.subscribe(name)) as messages:
-            async for _ in messages:
+            async for message in messages:
                 counts["messages"] += 1
+                if name != "GLOBAL_POSITION_INT":
+                    continue
+                boot_s = json.loads(message.fields_json)["time_boot_ms"] / 1000.0
+                offsets[i].append(time.monotonic() - boot_s)
+                busy(tick_s)
+                course = 0.01 * counts["setpoints"]
+                value = VelocityNedYaw(15.0 * math.cos(course), 15.0 * math.sin(course), 0.0, 0.0)
+                await vehicle.send(value)
+                counts["setpoints"] += 1
 
-    async def steer(vehicle: Plugins, offset_s: float) -> None:
-        await asyncio.sleep(offset_s)
-        course = 0.0
-        while True:
-            course += 0.01
-            value = VelocityNedYaw(15.0 * math.cos(course), 15.0 * math.sin(course), 0.0, 0.0)
-            await vehicle.send(value)
-            counts["setpoints"] += 1
-            await asyncio.sleep(SETPOINT_PERIOD_S)
-
-    tasks = [asyncio.create_task(read(v, name)) for v in plugins for name in MESSAGES]
-    tasks += [
-        asyncio.create_task(steer(v, SETPOINT_PERIOD_S * i / len(plugins)))
-        for i, v in enumerate(plugins)
-    ]
+    tasks = [asyncio.create_task(read(i, name)) for i in range(len(plugins)) for name in MESSAGES]
     await asyncio.sleep(seconds)
     for task in tasks:
         task.cancel()
     await asyncio.gather(*tasks, return_exceptions=True)
-    return counts["messages"], counts["setpoints"]
+    late = [o - min(each) for each in offsets if each for o in each]
+    return counts["messages"], counts["setpoints"], late
 
 
-async def run(base: int, vehicles: int, seconds: float, rounds: int) -> list[Phase]:
+async def run(base: int, vehicles: int, seconds: float, rounds: int, tick_s: float) -> list[Phase]:
     route_mavsdk_logs()  # to the logger, as a mission's hub does, not the terminal
     loop = asyncio.get_running_loop()
     mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
@@ -138,10 +152,10 @@ async def run(base: int, vehicles: int, seconds: float, rounds: int) -> list[Pha
                 ]
                 await asyncio.sleep(1.0)  # the subscriptions settle
                 cpu0, wall0 = time.process_time(), time.monotonic()
-                messages, setpoints = await fly_phase(plugins, seconds)
+                messages, setpoints, late = await fly_phase(plugins, seconds, tick_s)
                 cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
                 wakeups = inbox.wakeups if way == "on the loop" else None
-                phases.append(Phase(way, cpu, wall, messages, setpoints, wakeups))
+                phases.append(Phase(way, cpu, wall, messages, setpoints, wakeups, late))
                 del plugins
                 await asyncio.sleep(0.5)
         return phases
@@ -154,6 +168,9 @@ def main() -> None:
     parser.add_argument("--vehicles", type=int, default=10)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument(
+        "--tick-ms", type=float, default=0.6, help="CPU per position frame (an agent's tick)"
+    )
     args = parser.parse_args()
     base = find_free_udp_base_port(args.vehicles)
     command = ["sitl", "--vehicles", str(args.vehicles), "--base-port", str(base)]
@@ -161,29 +178,37 @@ def main() -> None:
         [sys.executable, "-m", "app", *command, "--speedup", "1"], stderr=subprocess.DEVNULL
     )
     try:
-        phases = asyncio.run(run(base, args.vehicles, args.seconds, args.rounds))
+        phases = asyncio.run(
+            run(base, args.vehicles, args.seconds, args.rounds, args.tick_ms / 1000.0)
+        )
     finally:
         sim.terminate()
         sim.wait(10.0)
-    n = args.vehicles
-    print(f"{n} vehicles, {args.seconds:.0f} s per phase, the simulator in its own process")
+    n, tick_s = args.vehicles, args.tick_ms / 1000.0
     print(
-        f"{'way':18s} {'CPU % core':>10s} {'per vehicle':>11s} {'messages':>9s} "
-        f"{'setpoints':>9s} {'wake-ups':>9s}"
+        f"{n} vehicles, {args.seconds:.0f} s per phase, a {args.tick_ms:g} ms tick per position, "
+        "the simulator in its own process"
     )
+    print(
+        f"{'way':18s} {'CPU % core':>10s} {'link / veh':>10s} {'messages':>9s} "
+        f"{'setpoints':>9s} {'wake-ups':>9s}  position late p50 / p90 / p99 / max (ms)"
+    )
+
+    def link_share(p: Phase) -> float:
+        return 100.0 * (p.cpu_s - p.setpoints * tick_s) / p.wall_s
+
     for p in phases:
-        share = 100.0 * p.cpu_s / p.wall_s
         wakeups = "-" if p.wakeups is None else str(p.wakeups)
+        late = np.percentile(np.asarray(p.late_s) * 1000.0, [50, 90, 99, 100])
         print(
-            f"{p.way:18s} {share:10.2f} {share / n:11.3f} {p.messages:9d} {p.setpoints:9d} "
-            f"{wakeups:>9s}"
+            f"{p.way:18s} {100.0 * p.cpu_s / p.wall_s:10.2f} {link_share(p) / n:10.3f} "
+            f"{p.messages:9d} {p.setpoints:9d} {wakeups:>9s}  "
+            + " / ".join(f"{v:.1f}" for v in late)
         )
     for r in range(args.rounds):
         wrapped_phase, loop_phase = phases[2 * r], phases[2 * r + 1]
-        ratio = (loop_phase.cpu_s / loop_phase.wall_s) / (
-            wrapped_phase.cpu_s / wrapped_phase.wall_s
-        )
-        print(f"round {r + 1}: on the loop / asyncio wrappers CPU = {ratio:.2f}x")
+        ratio = link_share(loop_phase) / link_share(wrapped_phase)
+        print(f"round {r + 1}: the link's CPU, on the loop / asyncio wrappers = {ratio:.2f}x")
 
 
 if __name__ == "__main__":
