@@ -81,9 +81,15 @@ async def test_a_connection_mavsdk_cannot_open_is_a_link_error():
 
 async def test_a_vehicle_that_never_appears_times_out_as_a_link_error():
     port = find_free_udp_base_port(1)
-    async with MavsdkHub([f"udpin://127.0.0.1:{port}"], ORIGIN) as hub:
+    hub = MavsdkHub([f"udpin://127.0.0.1:{port}"], ORIGIN)
+    assert hub.inbox is None
+    async with hub:
+        assert hub.inbox is not None
         with pytest.raises(LinkError, match="no autopilot with system id 2"):
             await hub.system(2, timeout_s=0.3)
+    assert hub.inbox is None
+    with pytest.raises(LinkError, match="hub not open"):
+        await hub.system_ids()
 
 
 def test_origin_round_trip_and_scale():

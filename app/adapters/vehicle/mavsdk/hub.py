@@ -83,7 +83,7 @@ class MavsdkHub:
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
-        mavsdk, self._mavsdk = self._mavsdk, None
+        mavsdk, self._mavsdk, self._inbox = self._mavsdk, None, None
         if mavsdk is not None:
             mavsdk.destroy()
 
