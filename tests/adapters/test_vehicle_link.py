@@ -82,12 +82,13 @@ async def test_a_connection_mavsdk_cannot_open_is_a_link_error():
 async def test_a_vehicle_that_never_appears_times_out_as_a_link_error():
     port = find_free_udp_base_port(1)
     hub = MavsdkHub([f"udpin://127.0.0.1:{port}"], ORIGIN)
-    assert hub.inbox is None
+    inboxes = [hub.inbox]  # before, while and after the hub is open
     async with hub:
-        assert hub.inbox is not None
+        inboxes.append(hub.inbox)
         with pytest.raises(LinkError, match="no autopilot with system id 2"):
             await hub.system(2, timeout_s=0.3)
-    assert hub.inbox is None
+    inboxes.append(hub.inbox)
+    assert [inbox is None for inbox in inboxes] == [True, False, True]
     with pytest.raises(LinkError, match="hub not open"):
         await hub.system_ids()
 
