@@ -8,13 +8,14 @@ flies N vehicles at real time. This process connects to them with MAVSDK and, fo
 does what a mission's link and agent do all flight long: it reads GLOBAL_POSITION_INT, VFR_HUD
 and HEARTBEAT through MavlinkDirect and answers each position with a tick of CPU (``--tick-ms``,
 an agent's median tick) and a velocity setpoint. It does that for S seconds through MAVSDK's
-asyncio wrappers (``OffboardAsync``, ``MavlinkDirectAsync``: a pool
-thread per call, a loop wake-up per message), then for S seconds on the loop (the setpoint made
-on the loop, the messages through one ``LoopInbox``), R times in turn. Printed per phase: the
-process's CPU (all its threads: the pool's and MAVSDK's too) as a share of one core, the same
-without the ticks per vehicle (the link's own cost), the messages read and setpoints sent, the
-loop wake-ups the messages took, and how late the positions reached the reader (host arrival
-against the vehicle's boot time, above each vehicle's least: the spread of the delivery delay);
+asyncio wrappers (``OffboardAsync``, ``MavlinkDirectAsync``: a pool thread per call, a loop
+wake-up per message), then for S seconds on the loop (the setpoint made on the loop, the
+messages through one ``LoopInbox``), R times in turn. Printed first: how long a setpoint and a
+``send_message`` made on the loop hold it. Then, per phase: the process's CPU (all its threads:
+the pool's and MAVSDK's too) as a share of one core, the same without the ticks per vehicle (the
+link's own cost), the messages read and setpoints sent, the loop wake-ups the messages took,
+and how late the positions reached the reader (host arrival against the vehicle's boot time,
+above each vehicle's least: the spread of the delivery delay);
 then the ratio of the two ways' CPU without the ticks.
 """
 
@@ -124,6 +125,36 @@ async def fly_phase(
     return counts["messages"], counts["setpoints"], late
 
 
+def print_call_times(system: System, calls: int = 2000) -> None:
+    """How long the calls made on the loop hold it: MAVSDK's blocking setpoint and
+    ``send_message`` on one vehicle, ``calls`` each (p50 / p99 / max in microseconds, and how
+    many took over a millisecond)."""
+    offboard, direct = Offboard(system), MavlinkDirect(system)
+    setpoint = VelocityNedYaw(10.0, 5.0, 0.0, 30.0)
+    fields = {"tc1": 0, "ts1": 1, "target_system": 1, "target_component": 1}
+    timesync = MavlinkMessage(
+        message_name="TIMESYNC",
+        target_system_id=1,
+        target_component_id=1,
+        fields_json=json.dumps(fields),
+    )
+    for name, call in (
+        ("Offboard.set_velocity_ned", lambda: offboard.set_velocity_ned(setpoint)),
+        ("MavlinkDirect.send_message", lambda: direct.send_message(timesync)),
+    ):
+        held = []
+        for _ in range(calls):
+            start = time.perf_counter()
+            call()
+            held.append(time.perf_counter() - start)
+        p50, p99, most = np.percentile(np.asarray(held) * 1e6, [50, 99, 100])
+        slow = sum(h > 1e-3 for h in held)
+        print(
+            f"{name}: {calls} calls, p50 {p50:.1f} us, p99 {p99:.1f} us, max {most:.0f} us, "
+            f"{slow} over 1 ms"
+        )
+
+
 async def run(base: int, vehicles: int, seconds: float, rounds: int, tick_s: float) -> list[Phase]:
     route_mavsdk_logs()  # to the logger, as a mission's hub does, not the terminal
     loop = asyncio.get_running_loop()
@@ -143,6 +174,7 @@ async def run(base: int, vehicles: int, seconds: float, rounds: int, tick_s: flo
                 if len(systems) == vehicles:
                     break
                 await asyncio.sleep(0.2)
+        print_call_times(systems[0])
         phases: list[Phase] = []
         for _ in range(rounds):
             for way in ("asyncio wrappers", "on the loop"):
