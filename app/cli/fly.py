@@ -236,6 +236,33 @@ def _cpu_line(summary: dict[str, object]) -> str:
     )
 
 
+def _course_loop_line(summary: dict[str, object]) -> str:
+    """Each vehicle's identified course loop (k, delay), or for one not identified how far
+    its identification got: what an operator of a real autopilot wants to know of the loop
+    the guidance was flown on."""
+    agents = summary.get("agents")
+    if not isinstance(agents, dict):
+        return ""
+    parts = []
+    for vehicle, c in agents.items():
+        loop = c.get("course_loop") if isinstance(c, dict) else None
+        if not isinstance(loop, dict):
+            continue
+        if loop.get("identified"):
+            parts.append(
+                f"vehicle {vehicle}: k {_fmt(loop.get('gain_per_s'), '.2f')} /s,"
+                f" delay {_fmt(loop.get('delay_s'), '.1f')} s"
+            )
+        else:
+            se = loop.get("rel_se")
+            se_text = f"{100.0 * se:.0f} %" if isinstance(se, float) else "-"
+            parts.append(
+                f"vehicle {vehicle}: not identified ({_fmt(loop.get('informative_s'), '.0f')} of"
+                f" {_fmt(loop.get('min_s'), '.0f')} s informative, rel. se {se_text})"
+            )
+    return "course loop: " + "; ".join(parts) if parts else ""
+
+
 def _respace_line(loss: dict[str, Any]) -> str:
     after = loss.get("after_first") or {}
     held = ""
@@ -281,6 +308,9 @@ def report(summary: dict[str, object]) -> str:
     cpu = _cpu_line(summary)
     if cpu:
         lines.append(cpu)
+    loop = _course_loop_line(summary)
+    if loop:
+        lines.append(loop)
     parts = summary.get("parts")
     if isinstance(parts, dict):
         for key, part in parts.items():

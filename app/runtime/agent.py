@@ -149,6 +149,9 @@ class AgentCounters:
     #: ``cpu_s`` per second of vehicle time: the share of one core the agent's work takes at
     #: 1x real time (at a speed-up the same work is done in less wall time); None before it ran
     cpu_share_at_1x: float | None = None
+    #: where the course-loop identification stands (``logic.course_loop_report``; None when
+    #: it is off), brought up to date with the CPU figures
+    course_loop: logic.CourseLoopReport | None = None
 
 
 class _FixBucket:
@@ -279,11 +282,13 @@ class VehicleAgent:
             self.measure_cpu()
 
     def measure_cpu(self) -> None:
-        """Bring the counters' ``wall_s`` and ``cpu_share_at_1x`` up to now (also while the
-        agent still runs, for a process that writes its counters before it stops)."""
+        """Bring the counters' ``wall_s``, ``cpu_share_at_1x`` and ``course_loop`` up to now
+        (also while the agent still runs, for a process that writes its counters before it
+        stops)."""
         if self._started is None:
             return
         c = self.counters
+        c.course_loop = logic.course_loop_report(self.state, self.params)
         c.wall_s = time.monotonic() - self._started
         rate = self._runtime.clock_rate
         if c.wall_s > 0.0 and rate > 0.0:

@@ -145,6 +145,36 @@ def test_a_material_change_of_the_loop_is_learned_again_and_reported() -> None:
     assert state.tuned.gain_per_s == pytest.approx(0.9, rel=0.06)
 
 
+def test_the_report_says_how_far_the_identification_got() -> None:
+    """The summary's ``course_loop``: None with identification off; after 5 s of flight not
+    identified, with fewer informative seconds than needed; after the weak loop is learned,
+    identified at the k and delay the agent flies, with the identifier's counts."""
+    params = _params(True)
+    assert logic.course_loop_report(logic.initial_agent_state(params), _params(False)) is None
+    _, _, early, _ = _loiter(params, 0.55, 5.0)
+    report = logic.course_loop_report(early, params)
+    assert report is not None
+    assert not report.identified
+    assert report.gain_per_s is None
+    assert report.delay_s is None
+    assert report.fit_gain_per_s > 0.0
+    assert report.informative_s < report.min_s == 10.0
+    assert report.max_rel_se == 0.05
+    _, _, learned, _ = _loiter(params, 0.55, 120.0)
+    report = logic.course_loop_report(learned, params)
+    assert report is not None
+    assert report.identified
+    assert (report.gain_per_s, report.delay_s) == pytest.approx(
+        logic.identified_course_loop(learned), abs=1e-4
+    )
+    assert report.gain_per_s == pytest.approx(0.55, rel=0.03)
+    assert report.fit_gain_per_s == pytest.approx(0.55, rel=0.03)
+    assert report.informative_samples > 100
+    assert report.rel_se is not None
+    assert 0.0 <= report.rel_se <= report.max_rel_se
+    assert report.informative_s >= report.min_s
+
+
 def test_holding_feeds_no_command_to_the_identifier() -> None:
     params = _params(True)
     state = logic.set_holding(logic.initial_agent_state(params), True)

@@ -159,5 +159,14 @@ async def test_arduplane_flies_the_mission_in_guided_by_speed(arduplane: Path) -
     config = _one_vehicle("ardupilot-sitl", "tcpout://127.0.0.1:5760")
     summary, events = await _fly(config, arduplane / "run")
     _check_the_flight(summary, events, "speed", config.limits.min_speed_m_s)
+    # the identification at work: ArduPlane 4.6.2's loop fits eq. (2) loosely, so in this
+    # short flight the fit may not yet reach its 5 % standard error (at 0cf9cfd: 20 s of
+    # informative flight, 8 % after 100 s); whatever it found is near the adapter's
+    # linearised k = 1 /s (the full mission's three vehicles: 0.77-1.08 /s)
+    loop = summary["agents"]["1"]["course_loop"]
+    assert loop["informative_s"] >= loop["min_s"], loop
+    assert loop["rel_se"] is not None, loop
+    assert loop["rel_se"] < 0.25, loop
+    assert 0.6 <= loop["fit_gain_per_s"] <= 1.6, loop
     identified = [e for e in events if e["kind"] == "course_loop_identified"]
-    assert identified, "the course loop was never identified in flight"
+    assert bool(identified) == loop["identified"], (identified, loop)

@@ -788,3 +788,11 @@ async def test_the_summary_counts_the_cpu_each_agent_and_the_run_took(full_run: 
     )
     line = fly_report(summary)
     assert f"agents' own work {100.0 * per['agents']:.2f} %" in line
+    # each agent's course-loop identification, in the summary and the report's line
+    loops = {key: agent["course_loop"] for key, agent in agents.items()}
+    for key, loop in loops.items():
+        assert loop["informative_samples"] > 0, key
+        if loop["identified"]:
+            assert f"vehicle {key}: k {loop['gain_per_s']:.2f} /s" in line
+        else:
+            assert f"vehicle {key}: not identified ({loop['informative_s']:.0f} of 10 s" in line

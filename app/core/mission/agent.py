@@ -927,6 +927,55 @@ def identified_course_loop(state: MissionAgentState) -> tuple[float, float] | No
     return None if tuned is None else (tuned.gain_per_s, tuned.delay_s)
 
 
+@dataclass(frozen=True, slots=True)
+class CourseLoopReport:
+    """Where a vehicle's course-loop identification stands (``course_loop_report``)."""
+
+    identified: bool  # an estimate was ready: then ``gain_per_s``, ``delay_s`` in use
+    gain_per_s: float | None
+    delay_s: float | None
+    fit_gain_per_s: float  # the identifier's fit now (the prior before 2 informative samples)
+    fit_delay_s: float
+    informative_s: float  # the informative seconds it remembers; ``min_s`` are needed
+    min_s: float
+    informative_samples: int
+    rel_se: float | None  # k's relative standard error (None: not yet defined)
+    max_rel_se: float
+    saturated: int  # ticks left out: the loop may have been saturated
+    quiet: int  # ticks left out: the course error too small for the noise
+    gaps: int  # windows restarted (a gap, a tick with no command)
+
+
+def course_loop_report(
+    state: MissionAgentState, params: MissionAgentParams
+) -> CourseLoopReport | None:
+    """Where the course-loop identification stands, for the run's summary (None when it is
+    off): whether an estimate was ready and which one is flown, the identifier's fit now,
+    and what it counted, so that a vehicle never identified shows which test held it back
+    (too few informative seconds, or a standard error still above the one needed)."""
+    id_params = params.course_id
+    if id_params is None:
+        return None
+    ident = state.course_id
+    est = cid.estimate(ident, id_params)
+    tuned = state.tuned
+    return CourseLoopReport(
+        identified=tuned is not None,
+        gain_per_s=None if tuned is None else round(tuned.gain_per_s, 4),
+        delay_s=None if tuned is None else tuned.delay_s,
+        fit_gain_per_s=round(est.gain_per_s, 4),
+        fit_delay_s=est.delay_s,
+        informative_s=round(ident.informative_s, 2),
+        min_s=id_params.min_informative_s,
+        informative_samples=ident.informative_count,
+        rel_se=round(est.rel_se, 4) if math.isfinite(est.rel_se) else None,
+        max_rel_se=id_params.max_rel_se,
+        saturated=ident.saturated,
+        quiet=ident.quiet,
+        gaps=ident.gaps,
+    )
+
+
 def _control(
     state: MissionAgentState,
     t_s: float,
