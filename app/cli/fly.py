@@ -236,6 +236,10 @@ def _cpu_line(summary: dict[str, object]) -> str:
     )
 
 
+def _percent(value: object) -> str:
+    return f"{100.0 * value:.0f} %" if isinstance(value, float) and math.isfinite(value) else "-"
+
+
 def _course_loop_line(summary: dict[str, object]) -> str:
     """Each vehicle's identified course loop (k, delay), or for one not identified how far
     its identification got: what an operator of a real autopilot wants to know of the loop
@@ -254,11 +258,12 @@ def _course_loop_line(summary: dict[str, object]) -> str:
                 f" delay {_fmt(loop.get('delay_s'), '.1f')} s"
             )
         else:
-            se = loop.get("rel_se")
-            se_text = f"{100.0 * se:.0f} %" if isinstance(se, float) else "-"
             parts.append(
-                f"vehicle {vehicle}: not identified ({_fmt(loop.get('informative_s'), '.0f')} of"
-                f" {_fmt(loop.get('min_s'), '.0f')} s informative, rel. se {se_text})"
+                f"vehicle {vehicle}: not identified"
+                f" ({_fmt(loop.get('informative_s'), '.0f')} s informative,"
+                f" {_fmt(loop.get('min_s'), '.0f')} needed;"
+                f" rel. se {_percent(loop.get('rel_se'))},"
+                f" {_percent(loop.get('max_rel_se'))} needed)"
             )
     return "course loop: " + "; ".join(parts) if parts else ""
 

@@ -191,3 +191,25 @@ def test_the_terminal_report_prints_the_first_instant_and_each_respace() -> None
     # lost at t = 6 (5 s after the command); gaps 160, 166, 172, 178 (k = 3), 184, 190, ...
     assert "vehicle lost at 5.0 s (3 -> 2): re-spaced within 5.0 deg after 3.0 s" in text
     assert "within 40 % of 4.0 s" in text  # 178 and 184 within, 190, 196, 202 out
+
+
+def test_the_terminal_report_says_each_course_loop_or_how_far_it_got() -> None:
+    from app.cli.fly import report
+
+    identified = {"identified": True, "gain_per_s": 0.9312, "delay_s": 0.2}
+    pending = {
+        "identified": False,
+        "informative_s": 19.33,
+        "min_s": 10.0,
+        "rel_se": 0.0747,
+        "max_rel_se": 0.05,
+    }
+    agents = {"1": {"course_loop": identified}, "2": {"course_loop": pending}, "3": {}}
+    text = report({"wall_s": 1.0, "mission_t_s": 2.0, "agents": agents})
+    assert (
+        "course loop: vehicle 1: k 0.93 /s, delay 0.2 s; "
+        "vehicle 2: not identified (19 s informative, 10 needed; rel. se 7 %, 5 % needed)"
+    ) in text.splitlines()
+    # identification off (no course_loop block): no line
+    off = report({"wall_s": 1.0, "mission_t_s": 2.0, "agents": {"1": {"course_loop": None}}})
+    assert "course loop" not in off
