@@ -14,8 +14,10 @@ The sequence is realistic and deterministic: ``configs/hil.toml``'s plan (three 
 the eq. 2 fixed-wing from their standby loiter, the target's A-B-C-D path, seeded sigma^2 =
 10 m^2 observations at 10 Hz per vehicle, the ground's fusion and stages from
 ``app.core.mission.ground``, telemetry at 10 Hz). Only the agents' ticks are timed; the ground
-and the vehicle model run outside the timer. Prints the median, p90, p99 and max per tick in ms,
-per stage too (target: median <= 2 ms).
+and the vehicle model run outside the timer. Prints the mean, median, p90, p99 and max per tick
+in ms, per stage too (target: median <= 2 ms), and what the mean tick costs a vehicle at 1x real
+time (a tick per telemetry frame), as a share of one core: the work that a planner replanning
+every so often spends in a few long ticks shows in the mean, not in the median.
 """
 
 import argparse
@@ -49,10 +51,11 @@ LOCAL_PERIOD_S = 0.2  # the agent publishes its local estimate at 5 Hz
 TARGET_MEDIAN_MS = 2.0
 
 
-def percentiles(values_ms: list[float]) -> tuple[float, float, float, float]:
+def tick_stats(values_ms: list[float]) -> tuple[float, float, float, float, float]:
+    """(mean, median, p90, p99, max) of tick times in ms."""
     a = np.asarray(values_ms)
     p50, p90, p99 = np.percentile(a, [50, 90, 99])
-    return float(p50), float(p90), float(p99), float(a.max())
+    return float(a.mean()), float(p50), float(p90), float(p99), float(a.max())
 
 
 def main() -> None:
@@ -152,12 +155,20 @@ def main() -> None:
         f"final stage {ground.stage.stage.value}, distance errors {[round(d, 1) for d in dist]} m"
     )
     print("one tick = [hear_fused] + observe + control, ms (per stage, then each part alone)")
-    print(f"  {'':<10} {'ticks':>6} {'median':>8} {'p90':>8} {'p99':>8} {'max':>8}")
+    head = f"{'ticks':>6} {'mean':>8} {'median':>8} {'p90':>8} {'p99':>8} {'max':>8}"
+    print(f"  {'':<10} {head}")
     rows = [("all", times_ms), *sorted(by_stage.items()), *parts.items()]
     for label, values in rows:
-        p50, p90, p99, top = percentiles(values)
-        print(f"  {label:<10} {len(values):>6} {p50:8.3f} {p90:8.3f} {p99:8.3f} {top:8.3f}")
-    p50 = percentiles(times_ms)[0]
+        mean, p50, p90, p99, top = tick_stats(values)
+        print(
+            f"  {label:<10} {len(values):>6} {mean:8.3f} {p50:8.3f} {p90:8.3f} {p99:8.3f} "
+            f"{top:8.3f}"
+        )
+    mean, p50, *_ = tick_stats(times_ms)
+    print(
+        f"mean {mean:.3f} ms per tick at {1 / TICK_S:.0f} Hz: {mean / TICK_S / 10:.2f} % of one "
+        "core per vehicle at 1x (the agent's own work)"
+    )
     ok = p50 <= TARGET_MEDIAN_MS
     print(f"median {p50:.3f} ms <= {TARGET_MEDIAN_MS} ms: {'PASS' if ok else 'FAIL'}")
 
