@@ -14,6 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from app import __version__
+from app.cli import _blas  # noqa: F401  (before any module that loads numpy)
 from app.errors import StandoffError
 
 
