@@ -1,6 +1,7 @@
 """One agent's control tick (estimation + guidance + phase keeping), timed over a whole mission.
 
-Run:  .venv/bin/python -m benchmarks.bench_agent_tick [CONFIG] [--duration S] [--seed N]
+Run:  .venv/bin/python -m benchmarks.bench_agent_tick [CONFIG ...] [--duration S] [--seed N]
+      [--repeat 3]
 
 A vehicle agent's work per telemetry frame, with the pure functions of
 ``app.core.mission.agent`` that the live agent loop calls: its camera's observation into the
@@ -18,12 +19,17 @@ and the vehicle model run outside the timer. Prints the mean, median, p90, p99 a
 in ms, per stage too (target: median <= 2 ms), and what the mean tick costs a vehicle at 1x real
 time (a tick per telemetry frame), as a share of one core: the work that a planner replanning
 every so often spends in a few long ticks shows in the mean, not in the median.
+
+Given several configs it compares them: each flown ``--repeat`` times, taking turns, and per
+config the lowest mean tick of its runs (the least disturbed by the shared machine) with its
+ratio to the first config's.
 """
 
 import argparse
 import math
 import time
 from collections import defaultdict
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,19 +64,31 @@ def tick_stats(values_ms: list[float]) -> tuple[float, float, float, float, floa
     return float(a.mean()), float(p50), float(p90), float(p99), float(a.max())
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("config", nargs="?", default="hil", help="mission config (default: hil)")
-    parser.add_argument("--duration", type=float, help="seconds of mission (default: all of it)")
-    parser.add_argument("--seed", type=int, default=1, help="observation noise seed")
-    args = parser.parse_args()
-    config = load_config(args.config, MissionConfig)
+@dataclass
+class Run:
+    """One mission's agent ticks: every tick's time (ms), per stage and per part, the wall
+    time, the final stage and distance errors."""
+
+    name: str
+    count: int
+    duration_s: float
+    times_ms: list[float]
+    by_stage: dict[str, list[float]]
+    parts: dict[str, list[float]]
+    wall_s: float
+    stage: str
+    distance_m: list[float]
+
+
+def fly(path: str, duration_s: float | None, seed: int) -> Run:
+    """The mission of ``path`` flown with every agent's tick timed (see the module)."""
+    config = load_config(path, MissionConfig)
     plan = build_plan(config)
     sim = sim_config(plan, base_port=14540)  # only for the starts; no socket is opened
     limits = config.limits.build()
     sigma = math.sqrt(config.sim.camera.sigma2_m2)
-    rng = np.random.default_rng(args.seed)
-    duration = args.duration if args.duration is not None else plan.end_t_s
+    rng = np.random.default_rng(seed)
+    duration = duration_s if duration_s is not None else plan.end_t_s
 
     vehicles = [vc.start for vc in sim.vehicles]
     agents: list[MissionAgentState] = [initial_agent_state(p) for p in plan.agents]
@@ -118,8 +136,8 @@ def main() -> None:
             agents[i] = state
             commands.append(command)
             # what the bus carries, outside the timer: status, local estimate
-            report = VehicleReport(t, v.east_m, v.north_m, v.course_rad, v.speed_m_s)
-            ground = hear_status(ground, p.vehicle, report)
+            status = VehicleReport(t, v.east_m, v.north_m, v.course_rad, v.speed_m_s)
+            ground = hear_status(ground, p.vehicle, status)
             if t >= next_local[i]:
                 estimate = state.local.estimate()
                 if estimate is not None:
@@ -141,36 +159,91 @@ def main() -> None:
                     vehicles[i], command.course_rad, command.speed_m_s, limits, PHYSICS_DT_S
                 )
     wall = time.perf_counter() - wall0
-
     truth = plan.target.state_at(duration)
     dist = [
         math.hypot(v.east_m - truth.east_m, v.north_m - truth.north_m) - config.radius_m
         for v in vehicles
     ]
-    print(
-        f"bench_agent_tick: {config.name}, {plan.count} agents, {duration:.0f} s of mission at "
-        f"{1 / TICK_S:.0f} Hz, {len(times_ms)} ticks, {wall:.1f} s wall in all"
+    return Run(
+        config.name,
+        plan.count,
+        duration,
+        times_ms,
+        by_stage,
+        parts,
+        wall,
+        ground.stage.stage.value,
+        dist,
     )
+
+
+def share(mean_ms: float) -> float:
+    """A mean tick's cost to a vehicle at 1x real time, as % of one core."""
+    return mean_ms / TICK_S / 10.0
+
+
+def report(run: Run) -> None:
     print(
-        f"final stage {ground.stage.stage.value}, distance errors {[round(d, 1) for d in dist]} m"
+        f"bench_agent_tick: {run.name}, {run.count} agents, {run.duration_s:.0f} s of mission at "
+        f"{1 / TICK_S:.0f} Hz, {len(run.times_ms)} ticks, {run.wall_s:.1f} s wall in all"
     )
+    print(f"final stage {run.stage}, distance errors {[round(d, 1) for d in run.distance_m]} m")
     print("one tick = [hear_fused] + observe + control, ms (per stage, then each part alone)")
     head = f"{'ticks':>6} {'mean':>8} {'median':>8} {'p90':>8} {'p99':>8} {'max':>8}"
     print(f"  {'':<10} {head}")
-    rows = [("all", times_ms), *sorted(by_stage.items()), *parts.items()]
+    rows = [("all", run.times_ms), *sorted(run.by_stage.items()), *run.parts.items()]
     for label, values in rows:
         mean, p50, p90, p99, top = tick_stats(values)
         print(
             f"  {label:<10} {len(values):>6} {mean:8.3f} {p50:8.3f} {p90:8.3f} {p99:8.3f} "
             f"{top:8.3f}"
         )
-    mean, p50, *_ = tick_stats(times_ms)
+    mean, p50, *_ = tick_stats(run.times_ms)
     print(
-        f"mean {mean:.3f} ms per tick at {1 / TICK_S:.0f} Hz: {mean / TICK_S / 10:.2f} % of one "
+        f"mean {mean:.3f} ms per tick at {1 / TICK_S:.0f} Hz: {share(mean):.2f} % of one "
         "core per vehicle at 1x (the agent's own work)"
     )
     ok = p50 <= TARGET_MEDIAN_MS
     print(f"median {p50:.3f} ms <= {TARGET_MEDIAN_MS} ms: {'PASS' if ok else 'FAIL'}")
+
+
+def compare(paths: list[str], duration_s: float | None, seed: int, repeat: int) -> None:
+    """Every config flown ``repeat`` times, taking turns (so that a busy spell of the machine
+    falls on all of them alike); per config the lowest mean tick of its repeats, the least
+    disturbed, and its ratio to the first config's."""
+    means: dict[str, list[float]] = {path: [] for path in paths}
+    for r in range(repeat):
+        for path in paths:
+            run = fly(path, duration_s, seed)
+            mean = tick_stats(run.times_ms)[0]
+            means[path].append(mean)
+            print(f"  round {r + 1}: {path}: mean tick {mean:.3f} ms ({share(mean):.2f} %)")
+    base = min(means[paths[0]])
+    print(f"bench_agent_tick: {len(paths)} configs, the lowest of {repeat} runs each")
+    print(f"  {'config':<40} {'mean ms':>8} {'% core':>7} {'ratio':>6}")
+    for path in paths:
+        best = min(means[path])
+        print(f"  {path:<40} {best:8.3f} {share(best):7.2f} {best / base:6.2f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "config",
+        nargs="*",
+        default=["hil"],
+        help="mission config (default: hil); several: compared side by side",
+    )
+    parser.add_argument("--duration", type=float, help="seconds of mission (default: all of it)")
+    parser.add_argument("--seed", type=int, default=1, help="observation noise seed")
+    parser.add_argument(
+        "--repeat", type=int, default=3, help="runs of each config when comparing (default 3)"
+    )
+    args = parser.parse_args()
+    if len(args.config) == 1:
+        report(fly(args.config[0], args.duration, args.seed))
+    else:
+        compare(args.config, args.duration, args.seed, max(args.repeat, 1))
 
 
 if __name__ == "__main__":
