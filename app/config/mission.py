@@ -59,7 +59,8 @@ class MissionGuidanceConfig(GuidanceConfig):
     in every stage (``airspeed``), or command the ground speed as the airspeed (``off``, the
     paper's still-air assumption); ``app.core.guidance.wind``, docs/guidance.md "Wind".
     ``track_planner``: in the track stage fly the field (``field``) or plan the team's course
-    rates and speeds ``track_horizon_s`` ahead on the target estimate and fly the plan
+    rates and speeds ``track_horizon_s`` ahead on the target estimate, piecewise constant over
+    blocks of ``track_block_s`` (a whole number of them in the horizon), and fly the plan
     (``horizon``, receding horizon, replanned every ``track_replan_s``; speed-honouring
     autopilots only: a vehicle whose phase actuator is the orbit radius keeps the field);
     ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon".
@@ -82,14 +83,25 @@ class MissionGuidanceConfig(GuidanceConfig):
     course_loop_identification: Literal["fly", "report", "off"] = "fly"
     wind: Literal["estimate", "airspeed", "off"] = "estimate"
     track_planner: Literal["field", "horizon"] = "field"
-    track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=2.0)] = 40.0
-    track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 2.0
+    track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=0.5)] = 40.0
+    track_block_s: Annotated[float, Field(ge=0.5, le=10.0, multiple_of=0.5)] = 1.0
+    track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 0.5
     gather_join: Literal["point", "seat"] = "seat"
 
     @model_validator(mode="after")
     def _fixed_track_needs_c(self) -> "MissionGuidanceConfig":
         if self.track_law == "fixed" and self.track_c is None and self.c is None:
             raise ValueError("track_law 'fixed' needs track_c (or c)")
+        return self
+
+    @model_validator(mode="after")
+    def _whole_blocks(self) -> "MissionGuidanceConfig":
+        blocks = self.track_horizon_s / self.track_block_s
+        if abs(blocks - round(blocks)) > 1e-9:
+            raise ValueError(
+                f"track_horizon_s ({self.track_horizon_s:g} s) must be a whole number of"
+                f" track_block_s ({self.track_block_s:g} s)"
+            )
         return self
 
     @field_validator("track_turn_slow_deg")

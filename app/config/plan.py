@@ -94,7 +94,9 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
                 )
             ),
             planner=g.track_planner,
-            horizon=HorizonParams(horizon_s=g.track_horizon_s, replan_s=g.track_replan_s),
+            horizon=HorizonParams(
+                horizon_s=g.track_horizon_s, block_s=g.track_block_s, replan_s=g.track_replan_s
+            ),
         )
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)
         estimator = load_estimator(config.estimator.config)

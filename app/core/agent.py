@@ -10,7 +10,7 @@ with defaults, so callers that do not know them keep working.
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Literal
 
 import numpy as np
@@ -960,8 +960,13 @@ def _horizon_command(
                     orbit_sign=g.orbit_sign,
                 )
                 team_warm = state.team_plan if warm is not None else None
-                guess = _field_guess(team_problem, params, velocity)
-                team_plan = hz.plan_team(inputs.t_s, team_problem, hp, team_warm, guess)
+                team_plan = hz.plan_team(
+                    inputs.t_s,
+                    team_problem,
+                    hp,
+                    team_warm,
+                    partial(_field_guess, team_problem, params, velocity),
+                )
                 current = team_plan.member(params.index, hp.block_s)
                 state = replace(state, team_plan=team_plan)
             else:

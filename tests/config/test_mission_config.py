@@ -207,18 +207,35 @@ def test_the_receding_horizon_planner_is_a_track_stage_setting():
         assert agent.track is not None
         assert agent.track.guidance.planner == "field"
     guidance = base.guidance.model_copy(
-        update={"track_planner": "horizon", "track_horizon_s": 30.0, "track_replan_s": 1.0}
+        update={
+            "track_planner": "horizon",
+            "track_horizon_s": 30.0,
+            "track_block_s": 1.5,
+            "track_replan_s": 1.0,
+        }
     )
     for agent in build_plan(base.model_copy(update={"guidance": guidance})).agents:
         assert agent.track is not None
         assert agent.track.guidance.planner == "horizon"
         assert agent.track.guidance.horizon.horizon_s == 30.0
         assert agent.track.guidance.horizon.replan_s == 1.0
+        assert agent.track.guidance.horizon.block_s == 1.5
         assert agent.agent.guidance.planner == "field"
-    for key, value in (("track_planner", "mpc"), ("track_horizon_s", 31.0)):
+    for key, value in (
+        ("track_planner", "mpc"),
+        ("track_horizon_s", 31.2),
+        ("track_block_s", 0.7),
+    ):
         raw = {**BASE, "guidance": {**BASE["guidance"], key: value}}
         with pytest.raises(ConfigError, match=f"guidance.{key}"):
             validate_config(raw, MissionConfig, source="m.toml")
+    # the horizon a whole number of blocks
+    raw = {
+        **BASE,
+        "guidance": {**BASE["guidance"], "track_horizon_s": 31.0, "track_block_s": 2.0},
+    }
+    with pytest.raises(ConfigError, match="whole number of track_block_s"):
+        validate_config(raw, MissionConfig, source="m.toml")
 
 
 def test_the_slow_turn_is_a_track_stage_setting_in_degrees() -> None:
