@@ -63,7 +63,7 @@ class HorizonParams:
     #: rarely loses to it, and the guess costs a third of a plan
     guess_every_s: float = 2.0
     #: below this target speed the field is flown (it holds a still target's circle exactly;
-    #: the plan's 2 s blocks do not)
+    #: the plan's blocks do not: 2 s blocks held 2.2 m RMS)
     min_target_speed_m_s: float = 1.5
     #: the team plan's penalty on a phase running against the orbit's direction: the
     #: relative velocity's component along the orbit below ``direction_min_m_s``, per m/s
