@@ -3,6 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
       [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30] [--windows 10]
+      [--truth-fed]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -47,6 +48,9 @@ optimum (over C-D, the stop at D: what the oracle, knowing it, is ready for).
 Prints per seed the mission's figures, the oracle's, their ratio, the largest distance errors
 (mission, oracle), and the team's state at the segment's start (distance errors, speeds,
 adjacent gaps); with ``--causal`` the causal optimiser's figures; the means at the end.
+``--truth-fed`` lets the mission's agents steer on the true target instead of their estimates
+(``MissionSimSetup.truth_fed``): between the two, what the estimate costs the mission against
+the oracle.
 ``--run`` adds missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the
 simulator), read from their track.csv and summary.json.
 """
@@ -739,6 +743,12 @@ def main() -> None:
         default=None,
         help="the mission's track-stage planner ([guidance] track_planner; default: the file's)",
     )
+    ap.add_argument(
+        "--truth-fed",
+        action="store_true",
+        help="the mission's agents steer on the true target, not their estimates (what the "
+        "estimation costs against the oracle)",
+    )
     args = ap.parse_args()
     base = load_config(args.config, MissionConfig)
     if args.planner is not None:
@@ -765,6 +775,7 @@ def main() -> None:
             if args.wind
             else ""
         )
+        + (", the agents steering on the true target" if args.truth_fed else "")
         + f", fast-sim seeds {args.seeds} (tracking command "
         f"+{args.vary_command:g} s per seed), runs {[str(r) for r in args.run]}, oracle step "
         f"{args.dt:g} s; cost = "
@@ -782,7 +793,7 @@ def main() -> None:
             update={"tracking_command_s": base.tracking_command_s + args.vary_command * seed}
         )
         plan = build_plan(config)
-        result = run_mission_sim(MissionSimSetup(plan, seed=seed))
+        result = run_mission_sim(MissionSimSetup(plan, seed=seed, truth_fed=args.truth_fed))
         figs = track_figures(result, plan.target.labels)[args.segment]
         mission = (figs["dist_rms_m"], figs["spacing_rms_deg"])
         rows.append(
