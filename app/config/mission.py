@@ -62,8 +62,10 @@ class MissionGuidanceConfig(GuidanceConfig):
     rates and speeds ``track_horizon_s`` ahead on the target estimate, piecewise constant over
     blocks of ``track_block_s`` (a whole number of them in the horizon), and fly the plan
     (``horizon``, receding horizon, replanned every ``track_replan_s``; speed-honouring
-    autopilots only: a vehicle whose phase actuator is the orbit radius keeps the field);
-    ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon".
+    autopilots only: a vehicle whose phase actuator is the orbit radius keeps the field); a
+    team of up to ``track_joint_max_vehicles`` is planned jointly by every agent, a larger
+    one each vehicle alone against its seat (the joint plan's work grows with the square of
+    the team); ``app.core.guidance.horizon``, docs/guidance.md "Receding horizon".
     ``gather_join``: in gather, fly each vehicle to a seat of its own on the circle, planned
     for the team at the tracking command so that the slowest arrives as soon as it can
     (``seat``; teams of 2 to 5, larger ones join at one point), or let the field bring the whole
@@ -86,6 +88,7 @@ class MissionGuidanceConfig(GuidanceConfig):
     track_horizon_s: Annotated[float, Field(ge=4.0, le=120.0, multiple_of=0.5)] = 40.0
     track_block_s: Annotated[float, Field(ge=0.5, le=10.0, multiple_of=0.5)] = 1.0
     track_replan_s: Annotated[float, Field(ge=0.1, le=10.0, allow_inf_nan=False)] = 0.5
+    track_joint_max_vehicles: Annotated[int, Field(ge=2, le=100)] = 5
     gather_join: Literal["point", "seat"] = "seat"
 
     @model_validator(mode="after")

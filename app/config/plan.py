@@ -95,7 +95,10 @@ def build_plan(config: MissionConfig, vehicles: int | None = None) -> MissionPla
             ),
             planner=g.track_planner,
             horizon=HorizonParams(
-                horizon_s=g.track_horizon_s, block_s=g.track_block_s, replan_s=g.track_replan_s
+                horizon_s=g.track_horizon_s,
+                block_s=g.track_block_s,
+                replan_s=g.track_replan_s,
+                joint_max_vehicles=g.track_joint_max_vehicles,
             ),
         )
         standby = GuidanceParams(radius_m=config.standby.radius_m, orbit=config.orbit)

@@ -932,7 +932,7 @@ def _horizon_command(
         joint = (
             hp.joint
             and ph.law != "none"
-            and len(team) >= 2
+            and 2 <= len(team) <= hp.joint_max_vehicles
             and len(inputs.team_motion) == len(team)
         )
         try:

@@ -212,6 +212,7 @@ def test_the_receding_horizon_planner_is_a_track_stage_setting():
             "track_horizon_s": 30.0,
             "track_block_s": 1.5,
             "track_replan_s": 1.0,
+            "track_joint_max_vehicles": 8,
         }
     )
     for agent in build_plan(base.model_copy(update={"guidance": guidance})).agents:
@@ -220,11 +221,13 @@ def test_the_receding_horizon_planner_is_a_track_stage_setting():
         assert agent.track.guidance.horizon.horizon_s == 30.0
         assert agent.track.guidance.horizon.replan_s == 1.0
         assert agent.track.guidance.horizon.block_s == 1.5
+        assert agent.track.guidance.horizon.joint_max_vehicles == 8
         assert agent.agent.guidance.planner == "field"
     for key, value in (
         ("track_planner", "mpc"),
         ("track_horizon_s", 31.2),
         ("track_block_s", 0.7),
+        ("track_joint_max_vehicles", 1),
     ):
         raw = {**BASE, "guidance": {**BASE["guidance"], key: value}}
         with pytest.raises(ConfigError, match=f"guidance.{key}"):

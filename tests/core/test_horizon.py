@@ -304,6 +304,32 @@ def test_agent_step_flies_the_plan_and_says_so():
     assert alone.team_plan is None
 
 
+def test_a_team_larger_than_joint_max_vehicles_plans_each_vehicle_alone():
+    g = GuidanceParams(
+        90.0, law="frew", orbit_plan="ellipse", inverse_field=False, planner="horizon"
+    )
+    params = AgentParams(0, ENV, g, PhaseParams("paper", gain_per_s=0.1))
+    cap = g.horizon.joint_max_vehicles
+
+    def first_plan(n):
+        angles = [2.0 * math.pi * j / n for j in range(n)]
+        team = tuple((90.0 * math.cos(a), 90.0 * math.sin(a)) for a in angles)
+        motion = tuple((math.pi - a, 14.0) for a in angles)  # clockwise tangent, counter-cw
+        own = OwnTelemetry(team[0][0], team[0][1], motion[0][0], 14.0)
+        inputs = AgentInputs(5.0, own, TargetInfo(0.0, 0.0, 0.0, 7.0), team, motion)
+        state, command, _ = agent_step(AgentState(), inputs, params)
+        assert state.plan is not None
+        assert 10.0 <= command.speed_m_s <= 18.0
+        return state
+
+    joint = first_plan(cap)
+    assert joint.team_plan is not None
+    assert joint.team_plan.controls.shape[2] == cap
+    assert first_plan(cap + 1).team_plan is None
+    with pytest.raises(ValueError, match="joint_max_vehicles"):
+        hz.HorizonParams(joint_max_vehicles=1)
+
+
 def test_a_vehicle_that_flies_the_radius_actuator_keeps_the_field():
     base = GuidanceParams(90.0, law="frew", orbit_plan="ellipse", inverse_field=False)
     phase = PhaseParams("paper", gain_per_s=0.1, actuator="radius")
