@@ -368,6 +368,10 @@ class AgentState:
     #: vehicle's own, and the team's it is part of (a joint plan; None: planned alone)
     plan: hz.Plan | None = None
     team_plan: hz.TeamPlan | None = None
+    #: the target velocity the planner took to be steady (None: none yet), and until when the
+    #: field is flown after the target's last manoeuvre (``HorizonParams.manoeuvre_dv_m_s``)
+    manoeuvre_ref: tuple[float, float] | None = None
+    field_until_s: float = -math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -895,8 +899,10 @@ def _horizon_command(
     """``planner = "horizon"``: plan again every ``replan_s`` (from the vehicle's state, on the
     target's predicted path and the seat), and fly the plan at this tick: its course with its
     rate fed forward (``course_command``), its speed command. The field's ``fallback`` is
-    flown if the plan cannot be made (reported once per episode as ``horizon-fallback``), and
-    around a target slower than ``min_target_speed_m_s``."""
+    flown if the plan cannot be made (reported once per episode as ``horizon-fallback``),
+    around a target slower than ``min_target_speed_m_s``, and for ``manoeuvre_settle_s`` after
+    the target's estimated velocity moved ``manoeuvre_dv_m_s`` from the one the planner took
+    to be steady (reported as ``horizon-hold`` where a plan was being flown)."""
     g, env, ph = params.guidance, params.envelope, params.phase
     if ph.actuator == "radius":
         # the autopilot holds its own airspeed: the plan's speeds would not be flown
@@ -907,6 +913,24 @@ def _horizon_command(
         # a still target: the field holds its circle exactly (a new plan starts when it moves)
         if state.plan is None:
             return state, fallback, _NO_EVENTS
+        return replace(state, plan=None, team_plan=None), fallback, _NO_EVENTS
+    velocity_now = (tgt.v_east_m_s, tgt.v_north_m_s)
+    ref = state.manoeuvre_ref
+    if ref is None:
+        state = replace(state, manoeuvre_ref=velocity_now)
+    else:
+        change = math.hypot(velocity_now[0] - ref[0], velocity_now[1] - ref[1])
+        if change > hp.manoeuvre_dv_m_s:
+            until = inputs.t_s + hp.manoeuvre_settle_s
+            state = replace(state, manoeuvre_ref=velocity_now, field_until_s=until)
+            if state.plan is not None:
+                detail = (
+                    f"the target's velocity changed by {change:.1f} m/s: the field flies"
+                    f" until {hp.manoeuvre_settle_s:g} s after its manoeuvre"
+                )
+                hold = (AgentEvent(inputs.t_s, "horizon-hold", detail),)
+                return replace(state, plan=None, team_plan=None), fallback, hold
+    if inputs.t_s < state.field_until_s:
         return replace(state, plan=None, team_plan=None), fallback, _NO_EVENTS
     current = state.plan
     events = _NO_EVENTS

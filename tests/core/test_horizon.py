@@ -368,6 +368,52 @@ def test_around_a_still_target_the_field_is_flown_and_the_plan_dropped():
     assert events == ()
 
 
+def test_after_the_target_manoeuvres_the_field_flies_until_it_settles():
+    base = GuidanceParams(90.0, law="frew", orbit_plan="ellipse", inverse_field=False)
+    horizon = replace(base, planner="horizon")
+    hp = horizon.horizon
+    phase = PhaseParams("paper", gain_per_s=0.1)
+    team = ((100.0, 0.0), (-50.0, 80.0), (-50.0, -80.0))
+    motion = ((0.0, 14.0), (2.6, 14.0), (4.7, 14.0))
+    own = OwnTelemetry(100.0, 0.0, 0.0, 14.0)
+    north = AgentInputs(5.0, own, TargetInfo(0.0, 0.0, 0.0, 7.0), team, motion)
+    params = AgentParams(0, ENV, horizon, phase)
+    field_params = AgentParams(0, ENV, base, phase)
+    state, _, _ = agent_step(AgentState(), north, params)
+    assert state.plan is not None
+    # a velocity change within manoeuvre_dv_m_s is not a manoeuvre: the planner replans
+    drift = replace(
+        north, t_s=6.0, target=TargetInfo(0.0, 0.0, 0.0, 7.0 - 0.9 * hp.manoeuvre_dv_m_s)
+    )
+    state, _, events = agent_step(state, drift, params)
+    assert state.plan is not None
+    assert state.plan.t_s == 6.0
+    assert events == ()
+    # the target turns east: the plan is dropped and the field flown, and it says so
+    east = replace(north, t_s=7.0, target=TargetInfo(0.0, 0.0, 3.0, 0.0))
+    _, field_cmd, _ = agent_step(AgentState(), east, field_params)
+    state, cmd, events = agent_step(state, east, params)
+    assert cmd == field_cmd
+    assert state.plan is None
+    assert state.team_plan is None
+    assert [e.kind for e in events] == ["horizon-hold"]
+    # the field until manoeuvre_settle_s after the manoeuvre, then a new plan
+    held = replace(east, t_s=7.0 + hp.manoeuvre_settle_s - 0.1)
+    _, field_cmd, _ = agent_step(AgentState(), held, field_params)
+    state, cmd, events = agent_step(state, held, params)
+    assert cmd == field_cmd
+    assert state.plan is None
+    assert events == ()
+    settled = replace(east, t_s=7.0 + hp.manoeuvre_settle_s + 0.1)
+    state, _, events = agent_step(state, settled, params)
+    assert state.plan is not None
+    assert [e.kind for e in events] == ["horizon-on"]
+    with pytest.raises(ValueError, match="manoeuvre_dv_m_s"):
+        hz.HorizonParams(manoeuvre_dv_m_s=0.0)
+    with pytest.raises(ValueError, match="manoeuvre_settle_s"):
+        hz.HorizonParams(manoeuvre_settle_s=-1.0)
+
+
 def test_in_the_air_mass_the_teammates_motion_is_through_the_air_too():
     from app.core.mission.agent import _air_motion
 
