@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
       [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30] [--windows 10]
-      [--truth-fed]
+      [--truth-fed] [--latency 0.2]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -50,7 +50,7 @@ Prints per seed the mission's figures, the oracle's, their ratio, the largest di
 adjacent gaps); with ``--causal`` the causal optimiser's figures; the means at the end.
 ``--truth-fed`` lets the mission's agents steer on the true target instead of their estimates
 (``MissionSimSetup.truth_fed``): between the two, what the estimate costs the mission against
-the oracle.
+the oracle. ``--latency S`` delays the mission's commands by S s (the app not told).
 ``--run`` adds missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the
 simulator), read from their track.csv and summary.json.
 """
@@ -744,6 +744,14 @@ def main() -> None:
         help="the mission's track-stage planner ([guidance] track_planner; default: the file's)",
     )
     ap.add_argument(
+        "--latency",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="the mission's commands act S s after they are sent (MissionSimSetup.latency_s; "
+        "the app is not told)",
+    )
+    ap.add_argument(
         "--truth-fed",
         action="store_true",
         help="the mission's agents steer on the true target, not their estimates (what the "
@@ -776,6 +784,7 @@ def main() -> None:
             else ""
         )
         + (", the agents steering on the true target" if args.truth_fed else "")
+        + (f", commands {args.latency:g} s late" if args.latency > 0.0 else "")
         + f", fast-sim seeds {args.seeds} (tracking command "
         f"+{args.vary_command:g} s per seed), runs {[str(r) for r in args.run]}, oracle step "
         f"{args.dt:g} s; cost = "
@@ -793,7 +802,9 @@ def main() -> None:
             update={"tracking_command_s": base.tracking_command_s + args.vary_command * seed}
         )
         plan = build_plan(config)
-        result = run_mission_sim(MissionSimSetup(plan, seed=seed, truth_fed=args.truth_fed))
+        result = run_mission_sim(
+            MissionSimSetup(plan, seed=seed, truth_fed=args.truth_fed, latency_s=args.latency)
+        )
         figs = track_figures(result, plan.target.labels)[args.segment]
         mission = (figs["dist_rms_m"], figs["spacing_rms_deg"])
         rows.append(
