@@ -3,7 +3,7 @@
 Run:  .venv/bin/python -m benchmarks.bench_oracle [CONFIG] [--segment B-C] [--seeds 1 2 3 4 5 6]
       [--vary-command 2.9] [--run RUN_DIR ...] [--dt 0.2] [--planner field|horizon]
       [--worst 8] [--spacing-weight 1] [--causal 1] [--causal-horizon 30] [--windows 10]
-      [--truth-fed] [--latency 0.2]
+      [--truth-fed [all|position|velocity]] [--truth-lag 1] [--latency 0.2]
 
 For each seed the mission fast-sim (``app.compose.mission_fastsim``, as ``bench_track``) flies
 the whole mission; at the moment the target starts the segment, the team's positions, courses and
@@ -50,7 +50,9 @@ Prints per seed the mission's figures, the oracle's, their ratio, the largest di
 adjacent gaps); with ``--causal`` the causal optimiser's figures; the means at the end.
 ``--truth-fed`` lets the mission's agents steer on the true target instead of their estimates
 (``MissionSimSetup.truth_fed``): between the two, what the estimate costs the mission against
-the oracle. ``--latency S`` delays the mission's commands by S s (the app not told).
+the oracle; ``--truth-fed velocity`` (or ``position``) gives them only that part true, and
+``--truth-lag S`` the true velocity of S s before: how fresh it has to be to be worth having.
+``--latency S`` delays the mission's commands by S s (the app not told).
 ``--run`` adds missions flown for real (``standoff fly --out RUN_DIR``: through MAVSDK on the
 simulator), read from their track.csv and summary.json.
 """
@@ -753,9 +755,19 @@ def main() -> None:
     )
     ap.add_argument(
         "--truth-fed",
-        action="store_true",
+        nargs="?",
+        const="all",
+        choices=("all", "position", "velocity"),
         help="the mission's agents steer on the true target, not their estimates (what the "
-        "estimation costs against the oracle)",
+        "estimation costs against the oracle); 'position' or 'velocity': that part only, the "
+        "other their estimate's",
+    )
+    ap.add_argument(
+        "--truth-lag",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="with --truth-fed, the true velocity of S s before (MissionSimSetup.truth_lag_s)",
     )
     args = ap.parse_args()
     base = load_config(args.config, MissionConfig)
@@ -783,7 +795,13 @@ def main() -> None:
             if args.wind
             else ""
         )
-        + (", the agents steering on the true target" if args.truth_fed else "")
+        + (
+            f", the agents steering on the true target ({args.truth_fed}"
+            + (f", its velocity {args.truth_lag:g} s old" if args.truth_lag > 0.0 else "")
+            + ")"
+            if args.truth_fed
+            else ""
+        )
         + (f", commands {args.latency:g} s late" if args.latency > 0.0 else "")
         + f", fast-sim seeds {args.seeds} (tracking command "
         f"+{args.vary_command:g} s per seed), runs {[str(r) for r in args.run]}, oracle step "
@@ -803,7 +821,14 @@ def main() -> None:
         )
         plan = build_plan(config)
         result = run_mission_sim(
-            MissionSimSetup(plan, seed=seed, truth_fed=args.truth_fed, latency_s=args.latency)
+            MissionSimSetup(
+                plan,
+                seed=seed,
+                truth_fed=args.truth_fed is not None,
+                truth_of=args.truth_fed or "all",
+                truth_lag_s=args.truth_lag,
+                latency_s=args.latency,
+            )
         )
         figs = track_figures(result, plan.target.labels)[args.segment]
         mission = (figs["dist_rms_m"], figs["spacing_rms_deg"])

@@ -30,7 +30,7 @@ station records (errors against the true target), so they read like a live run's
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -56,7 +56,10 @@ class MissionSimSetup:
     and ArduPlane report it, WIND_COV / WIND), else the agents fit their own. With
     ``truth_fed`` the agents steer on the true target (position and velocity, exact, every tick)
     instead of their estimates: what guidance and phase keeping do with perfect knowledge of
-    the target (the estimators, the fusion and the stages still run as usual)."""
+    the target (the estimators, the fusion and the stages still run as usual). ``truth_of``
+    ("position" or "velocity") gives them only that part true, the other their own estimate's;
+    ``truth_lag_s`` gives them the true velocity of that many seconds before: what knowing
+    each part costs, and how fresh the velocity has to be to be worth having."""
 
     plan: MissionPlan
     seed: int = 1
@@ -73,6 +76,8 @@ class MissionSimSetup:
     track_override: tuple[AgentParams, ...] | None = None
     vehicle_limits: VehicleEnvelope | None = None
     truth_fed: bool = False
+    truth_of: Literal["all", "position", "velocity"] = "all"
+    truth_lag_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -93,6 +98,10 @@ class MissionSimSetup:
             raise ValueError("latency_s must be finite and >= 0")
         if not (math.isfinite(self.camera_sigma2_m2) and self.camera_sigma2_m2 >= 0.0):
             raise ValueError("camera_sigma2_m2 must be finite and >= 0")
+        if self.truth_of not in ("all", "position", "velocity"):
+            raise ValueError(f"truth_of must be all, position or velocity, got {self.truth_of!r}")
+        if not (math.isfinite(self.truth_lag_s) and self.truth_lag_s >= 0.0):
+            raise ValueError("truth_lag_s must be finite and >= 0")
 
 
 @dataclass
@@ -135,13 +144,29 @@ def _bus_global(estimate: GlobalEstimate) -> GlobalEstimate:
     return wire.global_to_core(wire.global_to_bus(estimate, "ground"))
 
 
-def _truth_estimate(t_s: float, truth: Any) -> GlobalEstimate:
-    """The true target as a fused estimate (no uncertainty to speak of): what ``truth_fed``
-    agents steer on."""
-    x = np.array(
-        [truth.east_m, truth.v_east_m_s, truth.north_m, truth.v_north_m_s, 0.0, 0.0],
-        dtype=np.float64,
-    )
+def _truth_steered(
+    setup: "MissionSimSetup",
+    t_s: float,
+    path: Any,
+    state: logic.MissionAgentState,
+    params: logic.MissionAgentParams,
+) -> GlobalEstimate | None:
+    """What a ``truth_fed`` agent steers on at ``t_s``, as a fused estimate with no uncertainty
+    to speak of: the true target's position and velocity (the velocity of ``truth_lag_s``
+    earlier), or with ``truth_of`` one of them true and the other the agent's own estimate
+    (None while it has none: it steers as it would)."""
+    now = path.state_at(t_s)
+    then = path.state_at(max(0.0, t_s - setup.truth_lag_s)) if setup.truth_lag_s > 0.0 else now
+    east, north, v_east, v_north = now.east_m, now.north_m, then.v_east_m_s, then.v_north_m_s
+    if setup.truth_of != "all":
+        known = logic.target_at(state, t_s, params)
+        if known is None:
+            return None
+        if setup.truth_of == "velocity":
+            east, north = known.east_m, known.north_m
+        else:
+            v_east, v_north = known.v_east_m_s, known.v_north_m_s
+    x = np.array([east, v_east, north, v_north, 0.0, 0.0], dtype=np.float64)
     return GlobalEstimate(t_s, x, np.eye(6) * 1e-6, ())
 
 
@@ -212,6 +237,7 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
     path = plan.target
     gusts = _Gusts(plan, setup.seed, dt)
     blowing = gusts if gusts.blows else None
+    truth = setup.truth_fed
 
     def control(t: float, vehicles: Sequence[FixedWingState]) -> Commands:
         """Statuses -> ground; its tick (fusion, stage, sample) -> agents; teammates' fixes;
@@ -238,12 +264,15 @@ def run_mission_sim(setup: MissionSimSetup) -> MissionSimResult:
             fixes = logic.HeardTeammates(tuple((j, _fix(s)) for j, s in statuses if j != i))
             for event in (*inputs, fixes):
                 states[i], _ = logic.step(states[i], event, agents[i])
-        if setup.truth_fed:
-            exact = _truth_estimate(t, path.state_at(t))
-            states[:] = [replace(s, fused=exact) for s in states]
         out_commands = []
         for i, own in enumerate(owns):
+            heard_fused = states[i].fused
+            steered = _truth_steered(setup, t, path, states[i], agents[i]) if truth else None
+            if steered is not None:
+                states[i] = replace(states[i], fused=steered)
             states[i], out = logic.step(states[i], logic.Control(t, own), agents[i])
+            if steered is not None:  # what the ground sent stays the agent's fused estimate
+                states[i] = replace(states[i], fused=heard_fused)
             events.extend((e.t_s, e.kind, f"vehicle {i + 1}: {e.detail}") for e in out.events)
             command = out.command
             if command is None:  # a holding agent: the vehicle keeps its course and speed

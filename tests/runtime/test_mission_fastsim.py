@@ -1,6 +1,7 @@
 """The mission fast-sim: the live mission's logic in one deterministic loop."""
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -63,6 +64,10 @@ def test_bad_setups_are_rejected(plan):
     with pytest.raises(ValueError):
         MissionSimSetup(plan, latency_ticks=-1)
     with pytest.raises(ValueError):
+        MissionSimSetup(plan, truth_fed=True, truth_of="speed")  # type: ignore[arg-type]
+    with pytest.raises(ValueError):
+        MissionSimSetup(plan, truth_fed=True, truth_lag_s=-1.0)
+    with pytest.raises(ValueError):
         run_mission_sim(MissionSimSetup(plan, end_t_s=1.0, track_override=()))
 
 
@@ -84,3 +89,27 @@ def test_truth_fed_agents_steer_on_the_true_target_not_their_estimates():
         figures[truth_fed] = track_figures(result, plan.target.labels)["A-B"]["dist_rms_m"]
     assert figures[True] < 3.0
     assert figures[False] > 3.0 * figures[True]
+
+
+@pytest.mark.slow
+def test_truth_fed_in_part_or_late_steers_between_the_truth_and_the_estimates():
+    # the noisy camera as above: the true position with the estimated velocity, the true
+    # velocity with the estimated position, or the true target with a velocity 20 s old (the
+    # target still parked then, for half the leg) each fly between the two
+    plan = build_plan(load_config("test-short", MissionConfig))
+
+    def flown(**truth: Any) -> float:
+        setup = MissionSimSetup(plan, seed=1, camera_sigma2_m2=2500.0, end_t_s=85.0, **truth)
+        result = run_mission_sim(setup)
+        return float(track_figures(result, plan.target.labels)["A-B"]["dist_rms_m"])
+
+    estimates = flown()
+    exact = flown(truth_fed=True)
+    partial = {
+        "position": flown(truth_fed=True, truth_of="position"),
+        "velocity": flown(truth_fed=True, truth_of="velocity"),
+        "late velocity": flown(truth_fed=True, truth_lag_s=20.0),
+    }
+    assert exact < 1.0
+    for what, figure in partial.items():
+        assert 3.0 * exact < figure < estimates, (what, figure, exact, estimates)
