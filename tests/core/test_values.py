@@ -1,6 +1,8 @@
 """``app.core.values.replace`` gives what ``dataclasses.replace`` gives, faster."""
 
 import dataclasses
+import itertools
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -84,3 +86,43 @@ def test_a_cached_estimate_is_not_carried_into_a_copy_with_another_filter_state(
     # a field left out of __init__ starts as __init__ leaves it, on both ways of copying
     assert dataclasses.replace(first, imm=moved) == second
     assert second.consecutive_gated == first.consecutive_gated
+
+
+def _sent_at(every: Every, times: Sequence[float]) -> list[float]:
+    """The times of ``times`` at which ``every`` was due (and so sent)."""
+    out = []
+    for t in times:
+        if every.due(t):
+            every = every.sent(t)
+            out.append(t)
+    return out
+
+
+def test_a_schedule_paced_by_times_a_period_apart_skips_none_of_them() -> None:
+    # statuses of three vehicles a few ms apart, each vehicle's 0.1 s apart as sums of floats
+    # give them: the station's tick must come every 0.1 s, not every 0.2 s now and then
+    times = sorted(
+        sum([0.1] * k, start=11.6) + offset for k in range(400) for offset in (0.0, 0.0024, 0.0036)
+    )
+    ticks = _sent_at(Every(0.1), times)
+    gaps = [b - a for a, b in itertools.pairwise(ticks)]
+    assert len(ticks) == 400
+    assert max(gaps) < 0.1 + 0.004
+    # one vehicle alone, its frames 0.1 s apart give or take a ms of clock jitter
+    jitter = [0.1 * k + (0.001 if k % 3 == 1 else -0.001 if k % 3 == 2 else 0.0) for k in range(50)]
+    assert len(_sent_at(Every(0.1), jitter)) == 50
+
+
+def test_a_schedule_keeps_its_rate_and_starts_again_after_a_gap() -> None:
+    fast_frames = [0.02 * k for k in range(500)]  # 50 Hz telemetry paces a 0.2 s schedule
+    sent = _sent_at(Every(0.2), fast_frames)
+    gaps = [b - a for a, b in itertools.pairwise(sent[1:])]
+    # five a second: each a frame of the slot's time at most, none a slot late
+    assert len(gaps) == 49
+    assert all(abs(g - 0.2) < 0.02 + 1e-9 for g in gaps)
+    assert abs(sent[-1] - sent[1] - 49 * 0.2) < 0.02 + 1e-9
+    # a silence of 3 s: the first time after it is due at once, the grid restarts there
+    after_gap = _sent_at(Every(0.5), [0.0, 0.5, 1.0, 4.2, 4.3, 4.7, 5.2])
+    assert after_gap == [0.0, 0.5, 1.0, 4.2, 4.7, 5.2]
+    # period 0: every time
+    assert _sent_at(Every(0.0), [1.0, 1.0, 1.1]) == [1.0, 1.0, 1.1]
