@@ -98,6 +98,15 @@ def stop_all(proc: subprocess.Popen[str], children: dict[str, int]) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
+def how_it_ended(proc: subprocess.Popen[str], out: str, err: str, run_dir: Path) -> str:
+    """What a failed stop test needs to tell how the mission ended: the exit code, the end
+    of its output and the last events of its run folder."""
+    events = run_dir / "events.jsonl"
+    last = events.read_text().splitlines()[-12:] if events.exists() else ["(no events.jsonl)"]
+    head = [f"exit code {proc.returncode}", "stdout:", *out.splitlines()[-8:], "stderr:", err]
+    return "\n".join([*head, "events:", *last])
+
+
 def last_mode(tlog: Path) -> str:
     """The flight mode in the vehicle's last heartbeat that the run's log has."""
     log = mavutil.mavlink_connection(str(tlog))
@@ -121,11 +130,11 @@ def test_a_ctrl_c_in_the_terminal_holds_every_vehicle_before_the_simulator_stops
         for pid in children.values():
             assert os.getsid(pid) != os.getsid(proc.pid)
         os.killpg(proc.pid, signal.SIGINT)  # what the terminal does on Ctrl-C
-        _, err = proc.communicate(timeout=STOP_TIMEOUT_S)
+        out, err = proc.communicate(timeout=STOP_TIMEOUT_S)
         assert all(gone(pid, 10.0) for pid in children.values())
     finally:
         stop_all(proc, children)
-    assert "standoff fly: interrupted" in err
+    assert "standoff fly: interrupted" in err, how_it_ended(proc, out, err, tmp_path)
     assert "link lost" not in err
     assert "hold on exit failed" not in err
     for i in range(1, VEHICLES + 1):
