@@ -9,9 +9,11 @@ from app.core.estimation.messages import LocalEstimate
 from app.core.mission.ground import (
     GroundParams,
     GroundState,
+    HeardStatuses,
     VehicleReport,
     hear_local,
     hear_status,
+    step,
     tick,
 )
 from app.core.mission.stage import Stage
@@ -128,3 +130,48 @@ def test_allocations_go_out_once_per_feedback_period_and_fusions_between_without
     # an estimate built before the last allocation is refused
     state = hear_local(state, replace(local(0, 1.05), alloc_t_s=0.0))
     assert state.main.stale_basis_dropped == 1
+
+
+@pytest.mark.parametrize("t0", [11.6, 100.0, 237.2053])
+def test_the_ground_fuses_every_fuse_period_when_statuses_come_a_rounding_error_early(t0):
+    """Three vehicles' statuses and local estimates, each vehicle's 0.1 s apart as the sums
+    of floats a clock gives (a few ms between vehicles): the station ticks every 0.1 s and
+    fuses every 0.2 s, none a tick late (a tick a hair short of the next fusion's time once
+    put it off to the tick after: from 100 s on, every 0.3 s), and at the first tick after
+    each round of estimates (a grid of its own once fused them a tick later)."""
+    state = GroundState()
+    fusions = []
+    for k in range(200):
+        for v, offset in enumerate((0.0, 0.001, 0.0037)):
+            t = sum([0.1] * k, start=t0) + offset
+            heard = HeardStatuses(((v, on_circle(t, v, 120.0 * v)),))
+            state, out = step(state, heard, PARAMS)
+            if out.fused is not None:
+                fusions.append(out.fused.t_s)
+            if k % 2 == 0:
+                state = hear_local(state, local(v, t))
+    # the estimates of every other tick came after its statuses (as a camera fix comes after
+    # the telemetry of its instant): each round is fused at the next tick, every 0.2 s
+    assert len(fusions) == 100
+    assert np.diff(fusions).max() < 0.2 + 0.005
+    assert fusions[:3] == pytest.approx([t0 + 0.1, t0 + 0.3, t0 + 0.5])
+
+
+def test_the_ground_fuses_a_round_of_estimates_at_the_tick_it_is_in_and_predicts_without():
+    """Estimates heard before the statuses of their instant (the fast simulation's order) are
+    fused at that very tick; with no estimate new, the fused estimate is still brought forward
+    every two fuse periods (0.4 s) for the agents to steer by."""
+    state = GroundState()
+    fusions = []
+    for k in range(40):
+        t = 0.1 * k
+        for v in (0, 1, 2):
+            if k % 2 == 1 and k < 20:
+                state = hear_local(state, local(v, t))
+        for v in (0, 1, 2):
+            heard = HeardStatuses(((v, on_circle(t, v, 120.0 * v)),))
+            state, out = step(state, heard, PARAMS)
+            if out.fused is not None:
+                fusions.append(round(out.fused.t_s, 6))
+    assert fusions[:10] == pytest.approx([0.1, 0.3, 0.5, 0.7, 0.9, 1.1, 1.3, 1.5, 1.7, 1.9])
+    assert fusions[10:] == pytest.approx([2.3, 2.7, 3.1, 3.5, 3.9])

@@ -126,3 +126,14 @@ def test_a_schedule_keeps_its_rate_and_starts_again_after_a_gap() -> None:
     assert after_gap == [0.0, 0.5, 1.0, 4.2, 4.7, 5.2]
     # period 0: every time
     assert _sent_at(Every(0.0), [1.0, 1.0, 1.1]) == [1.0, 1.0, 1.1]
+
+
+def test_a_schedule_taken_late_starts_again_and_never_sends_twice_within_half_a_period() -> None:
+    # the statuses of the slot at 0.4 s came late (the first at 0.46 s): the next slot is a
+    # period after that one, and the status at 0.49 s, just inside the 0.5 s slot's early
+    # allowance, does not catch up
+    times = [0.0, 0.1, 0.2, 0.3, 0.46, 0.49, 0.5, 0.6, 0.7]
+    sent = _sent_at(Every(0.1), times)
+    assert sent == [0.0, 0.1, 0.2, 0.3, 0.46, 0.6, 0.7]
+    gaps = [b - a for a, b in itertools.pairwise(sent)]
+    assert min(gaps) > 0.05

@@ -31,7 +31,7 @@ from app.core.estimation.federated import (
 from app.core.estimation.messages import GlobalEstimate, LocalEstimate
 from app.core.estimation.models import MotionModel
 from app.core.frames import TAU
-from app.core.mission.schedule import Every
+from app.core.mission.schedule import Every, following_slot, slot_due
 from app.core.mission.stage import Stage, StageParams, StageState, TeamView, next_stage
 from app.core.mission.team import TeamSample, VehicleSample, dead_reckon
 from app.core.target import TargetMotion
@@ -57,7 +57,10 @@ class VehicleReport:
 class GroundParams:
     """``vehicles``: the team as launched (ids). ``tracking_command_t_s``: when the team is
     sent from standby to track (mission time). ``fuse_period_s``: how often the main filter
-    fuses. ``feedback_period_s``: how often at most a fused estimate goes out as an
+    fuses: at the first tick after new local estimates came, at most once a period (less the
+    early allowance of ``schedule.slot_due``), so the fusion follows the estimates' rounds
+    rather than a grid of its own that may fall a tick after them; with none new, once every
+    two periods. ``feedback_period_s``: how often at most a fused estimate goes out as an
     information allocation (the others go out with no shares, to steer by); longer than the
     round trip to the agents, since the main filter drops the estimates built on the
     allocation before the last (``main_receive``). ``lost_after_s``: mission-time silence
@@ -135,7 +138,8 @@ class GroundState:
     fused: GlobalEstimate | None = None
     stage: StageState = field(default_factory=StageState)
     mission_t_s: float = -math.inf
-    next_fuse_t_s: float = -math.inf
+    last_fuse_t_s: float = -math.inf  # when the main filter last fused (or coasted)
+    fused_received: int = 0  # the local estimates the main filter had received then
     next_feedback_t_s: float = -math.inf
     last_local_t_s: float = -math.inf  # time of the newest local estimate received
     ticks: Every = field(default_factory=lambda: Every(0.1))
@@ -351,23 +355,28 @@ def tick(
         events.append(GroundEvent(t, "vehicle_joined", f"vehicle {v + 1} is in the formation"))
     state = replace(state, active=active)
     fused = published = None
-    if t >= state.next_fuse_t_s:
+    period = params.fuse_period_s
+    since = t - state.last_fuse_t_s
+    fresh = state.main.received > state.fused_received
+    if slot_due(since, period, period) and (fresh or slot_due(since, 2.0 * period, period)):
         if state.fused is not None and t - state.last_local_t_s > params.coast_after_s:
             fused = coast(state.fused, t, params.coast_model)
         else:
             fused = main_fuse(state.main, t, params.main)
         main, next_feedback, published = state.main, state.next_feedback_t_s, fused
         if fused is not None:
-            if t >= next_feedback:
+            if slot_due(t, next_feedback, params.feedback_period_s):
                 main = main_allocate(state.main, fused, params.main)
-                next_feedback = t + params.feedback_period_s
+                next_feedback = following_slot(next_feedback, t, params.feedback_period_s)
             else:
                 published = replace(fused, beta=(), included_t_s=())
         state = replace(
             state,
             main=main,
             fused=fused if fused is not None else state.fused,
-            next_fuse_t_s=t + params.fuse_period_s,
+            # an empty fusion (no estimate yet) sets no time: the first is the first round's
+            last_fuse_t_s=t if fused is not None else state.last_fuse_t_s,
+            fused_received=state.main.received,
             next_feedback_t_s=next_feedback,
         )
     commanded = t >= params.tracking_command_t_s
