@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
 
     from app.adapters.live_view import LiveView
     from app.cli._options import with_overrides
-    from app.compose.mission import Mission
+    from app.compose.mission import Mission, fly_until_interrupted
     from app.config import load_config
     from app.config.mission import MissionConfig
     from app.config.plan import build_plan
@@ -156,20 +156,17 @@ def run(args: argparse.Namespace) -> int:
     console.print(gcs_line(config), soft_wrap=True, highlight=False, markup=False)
     view = LiveView(console) if not args.quiet else None
     with view if view is not None else contextlib.nullcontext():
-        result = asyncio.run(
-            Mission(
-                plan,
-                out,
-                connect=args.connect or (),
-                broker_url=args.broker,
-                base_port=args.base_port,
-                on_snapshot=view.update if view is not None else None,
-                operator=None if args.no_stdin else stdin_lines(),
-                notify=lambda line: console.print(
-                    line, soft_wrap=True, highlight=False, markup=False
-                ),
-            ).run()
+        mission = Mission(
+            plan,
+            out,
+            connect=args.connect or (),
+            broker_url=args.broker,
+            base_port=args.base_port,
+            on_snapshot=view.update if view is not None else None,
+            operator=None if args.no_stdin else stdin_lines(),
+            notify=lambda line: console.print(line, soft_wrap=True, highlight=False, markup=False),
         )
+        result = asyncio.run(fly_until_interrupted(mission.run(), mission.station_t_s))
     console.print(report(result.summary), highlight=False, markup=False, soft_wrap=True)
     return 0
 

@@ -14,9 +14,11 @@ it, none: every vehicle), published as bus commands to the agents.
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator, Callable, Sequence
+import signal
+from collections.abc import AsyncIterator, Callable, Coroutine, Sequence
 from contextlib import AsyncExitStack
 from pathlib import Path
+from typing import Any, TypeVar
 
 from app.adapters.bus import BrokerUrl, InProcessBroker, Will, open_bus
 from app.adapters.bus.signing import MissionKey
@@ -54,6 +56,7 @@ from sitl.ports import find_free_udp_base_port, udp_ports_free
 from sitl.server import SimulatorServer
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 class Mission:
@@ -269,6 +272,10 @@ class Mission:
             events.emit("interrupted", ground.state.mission_t_s)
             raise
 
+    def station_t_s(self) -> float | None:
+        """The mission time the ground station has reached (None before it runs)."""
+        return self.ground.state.mission_t_s if self.ground is not None else None
+
     def _clock_now(self) -> float | None:
         """The mission clock (None before it starts): the ground judges message times by it."""
         return self.mission_clock.now_s() if self.mission_clock is not None else None
@@ -286,6 +293,61 @@ class Mission:
         return MissionClock.starting_now(
             clock_rate(self.plan, self.builtin), self._clock.monotonic_s
         )
+
+
+#: how often, after a Ctrl-C, whether the mission still flies is looked at (s of the host)
+FLYING_ON_CHECK_S = 1.0
+
+
+async def fly_until_interrupted(
+    run: Coroutine[Any, Any, T], mission_t: Callable[[], float | None]
+) -> T:
+    """Await ``run`` (a mission's ``run()``), stopped by a Ctrl-C (SIGINT) as
+    ``KeyboardInterrupt``; ``mission_t``: the mission time its ground station has reached
+    (None before it has one).
+
+    The first SIGINT cancels the run (every vehicle held on the way out, the run folder
+    written). A cancellation must not be lost on the way: Python 3.11's asyncio can swallow one
+    that meets another event at the same instant, and the mission then flew on to its end. So
+    while the ground station's mission time still moves ``FLYING_ON_CHECK_S`` after the last
+    cancellation, it is cancelled again, and a run that ends normally after a SIGINT still
+    ends as interrupted. A second SIGINT raises ``KeyboardInterrupt`` at once."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
+    interrupts = 0
+
+    def check(t_then: float | None) -> None:
+        if task.done():
+            return
+        t_now = mission_t()
+        if t_now is not None and t_then is not None and t_now > t_then:
+            log.warning("the mission still flies after Ctrl-C (at %.1f s): cancelled again", t_now)
+            task.cancel()
+        loop.call_later(FLYING_ON_CHECK_S, check, t_now)
+
+    def on_sigint() -> None:
+        nonlocal interrupts
+        interrupts += 1
+        if interrupts > 1:
+            raise KeyboardInterrupt
+        task.cancel()
+        # the first look only notes the time: the station may take a status or two before
+        # the cancellation reaches it
+        loop.call_later(FLYING_ON_CHECK_S, check, None)
+
+    loop.add_signal_handler(signal.SIGINT, on_sigint)
+    try:
+        result = await run
+    except asyncio.CancelledError:
+        if interrupts:
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        loop.remove_signal_handler(signal.SIGINT)
+    if interrupts:
+        raise KeyboardInterrupt
+    return result
 
 
 def parse_operator_line(line: str, vehicles: int) -> Command | None:
