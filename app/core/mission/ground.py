@@ -59,9 +59,10 @@ class GroundParams:
     sent from standby to track (mission time). ``fuse_period_s``: how often the main filter
     fuses: at the first tick after new local estimates came, at most once a period (less the
     early allowance of ``schedule.slot_due``), so the fusion follows the estimates' rounds
-    rather than a grid of its own that may fall a tick after them; with none new, once every
-    two periods. ``feedback_period_s``: how often at most a fused estimate goes out as an
-    information allocation (the others go out with no shares, to steer by); longer than the
+    rather than a grid of its own that may fall a tick after them; with none new, a period and
+    a half after the last (a round a tick late is still waited for). ``feedback_period_s``:
+    how often at most a fused estimate goes out as an information allocation (the others go
+    out with no shares, to steer by); longer than the
     round trip to the agents, since the main filter drops the estimates built on the
     allocation before the last (``main_receive``). ``lost_after_s``: mission-time silence
     after which a vehicle leaves the team.
@@ -358,7 +359,7 @@ def tick(
     period = params.fuse_period_s
     since = t - state.last_fuse_t_s
     fresh = state.main.received > state.fused_received
-    if slot_due(since, period, period) and (fresh or slot_due(since, 2.0 * period, period)):
+    if slot_due(since, period, period) and (fresh or slot_due(since, 1.5 * period, period)):
         if state.fused is not None and t - state.last_local_t_s > params.coast_after_s:
             fused = coast(state.fused, t, params.coast_model)
         else:
