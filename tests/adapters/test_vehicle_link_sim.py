@@ -358,13 +358,18 @@ async def test_camera_observations_arrive_in_the_mission_frame():
             assert observation.sigma_m == pytest.approx(sigma, rel=1e-6)
         times = [o.t_s for o in received]
         assert times == sorted(times)
-        # each observation is the simulator's geolocated point, back in the local frame
+        # each observation is a geolocated point the simulator sent, back in the local frame
+        # within 5 cm, of about its time: a fix carries no time of its own and takes the newest
+        # telemetry frame's, which on a loaded machine may be the frame before or after its
+        # instant (matching by the nearest time alone then took a neighbour's noise)
         matched = 0
         for observation in received:
-            nearest = min(sent.values(), key=lambda o: abs(o.t_s - observation.t_s))
-            if abs(nearest.t_s - observation.t_s) < 0.15:
-                assert observation.east_m == pytest.approx(nearest.east_m, abs=0.05)
-                assert observation.north_m == pytest.approx(nearest.north_m, abs=0.05)
+            near = [o for o in sent.values() if abs(o.t_s - observation.t_s) < 0.35]
+            if any(
+                abs(o.east_m - observation.east_m) < 0.05
+                and abs(o.north_m - observation.north_m) < 0.05
+                for o in near
+            ):
                 matched += 1
         assert matched >= 30
         # and they scatter about the stationary target at the origin
