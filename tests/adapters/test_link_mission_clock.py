@@ -2,6 +2,7 @@
 differ by seconds share one mission time, and offboard is taken only in the air."""
 
 import asyncio
+import statistics
 import time
 from typing import Any
 
@@ -64,7 +65,12 @@ async def test_vehicles_booted_seconds_apart_share_one_mission_time() -> None:
                 behind.append(clock.now_s() - max(fa.t_s, fb.t_s))
             # one frame period (0.1 s of mission time) plus the jitter of a shared machine
             assert max(abs(g) for g in gaps) < 0.3, gaps
-            assert all(-0.05 < d < 0.5 for d in behind), behind
+            # never ahead of the clock, and behind it by a frame or two; at 5x a stall of 0.1 s of
+            # the wall under the suite's load is 0.5 s of mission time, so the bound on the worst
+            # sample is looser, and still far below the seconds that the boot clocks differ by
+            assert all(d > -0.05 for d in behind), behind
+            assert statistics.median(behind) < 0.3, behind
+            assert max(behind) < 1.5, behind
             # and the first vehicle's mission time is its simulator's time (its epoch)
             frame = a.latest
             assert frame is not None
