@@ -62,6 +62,34 @@ def test_ukf_equals_the_kalman_filter_on_linear_models(seed, dt, kind, alpha):
     np.testing.assert_allclose(pu[0], kf_post, rtol=1e-6, atol=1e-7 * np.abs(kf_post).max())
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    dt=st.floats(1e-4, 50.0),
+    alpha=st.floats(0.3, 1.5),
+    kappa=st.floats(0.0, 3.0),
+)
+def test_the_closed_form_prediction_is_the_unscented_transform_of_the_sigma_points(
+    seed, dt, alpha, kappa
+):
+    """The prediction works out F X, F P F^T + Q; here the sigma points are moved one by one,
+    as a UKF does, for the three models at once."""
+    models = [MotionModel("cv", 0.5), MotionModel("ca", 0.3), MotionModel("turn", 0.2, 0.1)]
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(3, 6)) * 10
+    p = np.stack([_random_spd(seed + k, 1.0 + k) for k in range(3)])
+    sigma = SigmaPoints(6, alpha, 2.0, kappa)
+    xp, pp = unscented_predict(x, p, models, dt, sigma)
+    points = sigma.points(x, p)  # (3, 13, 6)
+    for j, model in enumerate(models):
+        moved = np.array([model.transition(dt) @ point for point in points[j]])
+        mean = sigma.wm @ moved
+        dev = moved - mean
+        cov = (dev.T * sigma.wc) @ dev + model.process_noise(dt)
+        np.testing.assert_allclose(xp[j], mean, rtol=1e-9, atol=1e-9 * max(1, np.abs(mean).max()))
+        np.testing.assert_allclose(pp[j], cov, rtol=1e-7, atol=1e-8 * np.abs(cov).max())
+
+
 def test_same_estimates_as_filterpy_imm_over_ukfs():
     """The issue's equality check: filterpy's IMMEstimator over UKFs, same models and params."""
     params = default_imm_params()

@@ -3,9 +3,14 @@
 The IMM runs one UKF per motion model; here the r filters are one stack: means (r, 6) and
 covariances (r, 6, 6), so a step costs a handful of NumPy calls whatever r is. The prediction is
 the unscented transform of the motion model (Van der Merwe's scaled sigma points, as filterpy's
-``MerweScaledSigmaPoints``). The measurement is the target position, h(X) = [x, y] = H X, which is
-linear, so the unscented transform of h is exact: the update computes it in closed form
-(z_pred = H x, S = H P H^T + R, P_xz = P H^T), which is what the sigma points would give.
+``MerweScaledSigmaPoints``). Every model here (eqs 17, 19, 21) is linear in the state for a fixed
+step, X' = F X, and the unscented transform of a linear map is exact for any alpha, beta, kappa:
+the prediction computes it in closed form (F X, F P F^T + Q), which is what moving the sigma
+points gives (``tests/core/test_estimation_filters.py`` moves them one by one), without the
+Cholesky factor and the 13 points per model: the agent's step on a camera fix took a fifth less
+(0.44 against 0.34 ms in ``app.compose.mission_fastsim``). The measurement is the target position,
+h(X) = [x, y] = H X, which is linear too, so the update computes it in closed form as well
+(z_pred = H x, S = H P H^T + R, P_xz = P H^T).
 """
 
 import math
@@ -90,7 +95,7 @@ def unscented_predict(
     dt_s
         Step length in seconds (0 returns copies of the input).
     sigma
-        The sigma-point scheme.
+        The sigma-point scheme (the models being linear, it does not change the result).
     noise_scale
         Multiplies every Q (Appendix A's Q_i = beta_i^-1 Q_g).
 
@@ -103,11 +108,10 @@ def unscented_predict(
     if dt_s == 0.0:
         return x.copy(), p.copy()
     f_stack, q_stack = model_matrices(tuple(models), float(dt_s))
-    points = sigma.points(x, p)  # (r, 2n+1, n)
-    moved = points @ np.swapaxes(f_stack, 1, 2)  # each model's F applied to its sigma points
-    mean = sigma.wm @ moved  # (r, n)
-    dev = moved - mean[:, None, :]
-    cov = np.swapaxes(dev * sigma.wc[:, None], 1, 2) @ dev
+    # every model is linear for a fixed step, so the transform of the sigma points is exact and
+    # is F X, F P F^T in closed form, for any sigma-point scaling (the module docstring)
+    mean = (f_stack @ x[:, :, None])[:, :, 0]
+    cov = f_stack @ p @ np.swapaxes(f_stack, 1, 2)
     q = q_stack if noise_scale == 1.0 else q_stack * noise_scale
     return mean, symmetrise(cov + q)
 
