@@ -934,7 +934,12 @@ def _horizon_command(
         return replace(state, plan=None, team_plan=None), fallback, _NO_EVENTS
     current = state.plan
     events = _NO_EVENTS
-    if current is None or inputs.t_s >= current.t_s + hp.replan_s or inputs.t_s < current.t_s:
+    team_size = max(len(inputs.team_positions), 1)
+    if (
+        current is None
+        or inputs.t_s < current.t_s
+        or hz.replan_due(inputs.t_s, current.t_s, hp.replan_s, params.index, team_size)
+    ):
         air = hz.Airframe(
             env.min_speed_m_s,
             env.max_speed_m_s,

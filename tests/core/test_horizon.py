@@ -293,11 +293,18 @@ def test_agent_step_flies_the_plan_and_says_so():
     assert state.team_plan is not None
     assert 10.0 <= command.speed_m_s <= 18.0
     assert abs(math.remainder(command.course_rad - own.course_rad, math.tau)) <= 0.2 + 1e-9
-    # until the next replan the same plan is flown (no new plan, no event)
-    later = replace(inputs, t_s=5.0 + 0.6 * params.guidance.horizon.replan_s)
-    again, _, events = agent_step(state, later, params)
-    assert again.plan is state.plan
-    assert events == ()
+    # until the next replan the same plan is flown (no new plan, no event): vehicle 1 of 3
+    # plans on its slots, (1 + 1/2) / 3 of the 0.5 s period on, at 5.25 and 5.75 s
+    assert params.index == 1
+    planned_at = []
+    for k in range(1, 10):
+        tick = replace(inputs, t_s=round(5.0 + 0.1 * k, 10))
+        again, _, events = agent_step(state, tick, params)
+        assert events == ()
+        if again.plan is not state.plan:
+            planned_at.append(tick.t_s)
+        state = again
+    assert planned_at == [5.3, 5.8]
     # without the teammates' motion it plans alone, against its seat
     alone, _, _ = agent_step(AgentState(), replace(inputs, team_motion=()), params)
     assert alone.plan is not None
@@ -423,3 +430,41 @@ def test_in_the_air_mass_the_teammates_motion_is_through_the_air_too():
     assert course == pytest.approx(math.atan2(-3.0, 14.0))
     assert speed == pytest.approx(math.hypot(3.0, 14.0))
     assert _air_motion(0.4, 12.0, None) == (0.4, 12.0)
+
+
+def _replan_times(index: int, team: int, ticks: list[float], replan_s: float = 0.5) -> list[float]:
+    planned = ticks[0]
+    out = [planned]
+    for t in ticks[1:]:
+        if hz.replan_due(t, planned, replan_s, index, team):
+            planned = t
+            out.append(t)
+    return out
+
+
+@pytest.mark.parametrize("team", [2, 3, 5])
+def test_a_team_replans_every_period_on_frames_of_its_own(team):
+    # frames every 0.1 s with an autopilot clock's jitter of up to 4 ms either way
+    rng = np.random.default_rng(team)
+    ticks = [round(0.1 * k, 10) + float(rng.uniform(-0.004, 0.004)) for k in range(300)]
+    plans = [_replan_times(i, team, ticks) for i in range(team)]
+    for times in plans:
+        gaps = np.diff(times[2:])  # after the first (all at once) and the next (joining its slot)
+        assert np.allclose(gaps, 0.5, atol=0.01), gaps
+    # after the first plan no two vehicles plan on the same frame
+    later = [t for times in plans for t in times[1:]]
+    assert len(later) == len(set(later))
+
+
+def test_replan_slots_sit_between_the_frames():
+    # a team of 3: the slots of vehicle 0 at 0.083, 0.583 ... s, of vehicle 1 at 0.25, 0.75 ...,
+    # of vehicle 2 at 0.417, 0.917 ...; a frame 4 ms either side of 0.6 s is the same slot
+    assert hz.replan_due(0.596, 0.1, 0.5, 0, 3)
+    assert not hz.replan_due(0.504, 0.1, 0.5, 0, 3)
+    assert not hz.replan_due(0.2, 0.0, 0.5, 1, 3)
+    assert hz.replan_due(0.296, 0.0, 0.5, 1, 3)
+    assert not hz.replan_due(0.404, 0.3, 0.5, 2, 3)
+    assert hz.replan_due(0.496, 0.3, 0.5, 2, 3)
+    # alone: the middle of the period
+    assert hz.replan_due(0.3, 0.0, 0.5, 0, 1)
+    assert not hz.replan_due(0.2, 0.0, 0.5, 0, 1)

@@ -189,6 +189,26 @@ class Plan:
         return course, self.rates[-1], self.speeds[-1]  # pragma: no cover - last span is inf
 
 
+def replan_due(t_s: float, planned_t_s: float, replan_s: float, index: int, team: int) -> bool:
+    """Whether a plan made at ``planned_t_s`` is to be made again at ``t_s``: every
+    ``replan_s`` on a grid of slots staggered by the vehicle's place in the team, the slots of
+    ``index`` at (index + 1/2) / ``team`` of the period, so that the team's agents do not all
+    plan on one telemetry frame, and no slot falls on a frame of a 10 Hz telemetry (a frame a
+    hair early would put the plan off by a whole frame: the slots are 17 ms or more from the
+    frames for a team of 2, 3 or 5). Where they all planned on one frame, the agents sharing a
+    process steered one after another, each after the others' plans: over MAVLink at 3x
+    (seeds 1-3) each vehicle skipped 4-24 frames and waited up to 0.17-0.34 s for one;
+    staggered, 0-5 frames and up to 0.13-0.22 s. The fast simulation flies the same (eight
+    seeds, RMS distance within 0.12 m per segment; docs/mission.md, "The planner's time over
+    MAVLink")."""
+    offset = replan_s * ((index % team) + 0.5) / team if team > 0 else 0.0
+
+    def slot(x: float) -> int:
+        return math.floor((x - offset) / replan_s)
+
+    return slot(t_s) > slot(planned_t_s)
+
+
 def predict_target(
     velocity: tuple[float, float],
     accel: tuple[float, float],
